@@ -1,0 +1,1 @@
+"""The relnav command-line interface."""

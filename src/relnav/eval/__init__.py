@@ -1,0 +1,1 @@
+"""Evaluation: metrics, benchmark grids, results store, reports and plots."""

@@ -1,0 +1,61 @@
+"""Geometry core: SE(3), rotations, neighbourhoods, normals and local reference frames."""
+
+from relnav.geometry.neighbors import build_tree, knn, mean_resolution, radius_neighbors
+from relnav.geometry.normals import estimate_normals, local_covariances
+from relnav.geometry.rotations import (
+    angle_between_rotations,
+    euler_to_matrix,
+    hat,
+    matrix_to_euler,
+    matrix_to_quat,
+    matrix_to_rotvec,
+    project_to_so3,
+    quat_multiply,
+    quat_to_matrix,
+    random_rotation,
+    rotation_angle,
+    rotvec_to_matrix,
+)
+from relnav.geometry.se3 import (
+    compose,
+    exp_se3,
+    from_rt,
+    invert,
+    kabsch,
+    log_se3,
+    random_transform,
+    relative,
+    transform_points,
+    umeyama,
+)
+
+__all__ = [
+    "angle_between_rotations",
+    "build_tree",
+    "compose",
+    "estimate_normals",
+    "euler_to_matrix",
+    "exp_se3",
+    "from_rt",
+    "hat",
+    "invert",
+    "kabsch",
+    "knn",
+    "local_covariances",
+    "log_se3",
+    "matrix_to_euler",
+    "matrix_to_quat",
+    "matrix_to_rotvec",
+    "mean_resolution",
+    "project_to_so3",
+    "quat_multiply",
+    "quat_to_matrix",
+    "radius_neighbors",
+    "random_rotation",
+    "random_transform",
+    "relative",
+    "rotation_angle",
+    "rotvec_to_matrix",
+    "transform_points",
+    "umeyama",
+]

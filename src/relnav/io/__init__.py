@@ -1,0 +1,1 @@
+"""File I/O: point clouds, meshes, trajectories (TUM/KITTI) and sequence folders."""

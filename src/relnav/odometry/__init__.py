@@ -1,0 +1,1 @@
+"""Frame-to-frame odometry: :class:`Odometry` and :func:`run_sequence`."""

@@ -1,0 +1,1 @@
+"""Registration methods (feature pipeline, ICP family, baselines) behind one interface."""

@@ -1,0 +1,1 @@
+"""Simulation: targets, sensors, trajectories, attitude, scenarios and presets."""
