@@ -76,7 +76,7 @@ def main() -> None:
     except RelnavError as e:
         if _STATE["verbose"]:
             err_console.print_exception()
-        err_console.print(f"[bold red]error:[/] {e}", highlight=False)
+        err_console.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
         sys.exit(1)
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")

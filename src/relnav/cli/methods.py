@@ -1,7 +1,53 @@
-"""(being written)"""
+"""``relnav methods``: list every registration method and its building blocks."""
+
+from __future__ import annotations
+
+import importlib.util
 
 import typer
 
+from relnav.cli._common import console
+
+_EXTRA_MODULES = {"baselines": ("open3d", "kiss_icp", "small_gicp")}
+
+
+def _extra_available(extra: str | None) -> bool:
+    if extra is None:
+        return True
+    return all(importlib.util.find_spec(m) is not None for m in _EXTRA_MODULES.get(extra, ()))
+
+
+def methods() -> None:
+    """List registration methods, descriptors, groupers and estimators."""
+    from rich.table import Table
+
+    from relnav.estimation import available_estimators
+    from relnav.features import available_descriptors
+    from relnav.matching.grouping import available_groupers
+    from relnav.registration import available_methods
+
+    t = Table(title="registration methods (use with `relnav odometry --method`)")
+    for col in ("method", "description", "available"):
+        t.add_column(col)
+    for meta in available_methods().values():
+        ok = _extra_available(meta["extra"])
+        avail = "yes" if ok else f"[yellow]needs pip install 'relnav[{meta['extra']}]'[/]"
+        t.add_row(", ".join(meta["examples"]), meta["description"], avail)
+    console.print(t)
+    parts = Table(title="parts of feature:<descriptor>+<grouper>+<estimator>")
+    for col in ("kind", "name", "description"):
+        parts.add_column(col)
+    for name, spec in available_descriptors().items():
+        parts.add_row(
+            "descriptor", name, f"{spec.description} (D={spec.dim}, r={spec.radius_factor:g}·Tr)"
+        )
+    for name, desc in available_groupers().items():
+        parts.add_row("grouper", name, desc)
+    for name, desc in available_estimators().items():
+        parts.add_row("estimator", name, desc)
+    console.print(parts)
+
 
 def register(app: typer.Typer) -> None:
-    """Register this module's commands on ``app``."""
+    """Register ``relnav methods``."""
+    app.command("methods")(methods)

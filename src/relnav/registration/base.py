@@ -1,0 +1,115 @@
+"""The :class:`Registration` protocol, method strings and the method registry.
+
+A registration method aligns a *source* cloud onto a *target* cloud and returns a
+:class:`~relnav.registration.result.RegistrationResult` with ``T_target_source``
+(``target ≈ T @ source``). Methods are named by strings: a family prefix, optionally followed by
+``:`` and a family-specific spec, e.g. ``"feature:hods+gcc+alphabeta"`` or ``"icp-point"``.
+
+Methods that can reuse per-cloud work between calls (descriptors of the previous scan in odometry)
+implement the optional :class:`PreparedRegistration` protocol: ``prepare(points)`` returns an
+opaque object that ``register_prepared(source_prep, target_prep, init=...)`` consumes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from relnav.errors import ConfigError
+from relnav.registration.result import RegistrationResult
+
+__all__ = [
+    "PreparedRegistration",
+    "Registration",
+    "available_methods",
+    "get_registration",
+    "register_method",
+]
+
+
+@runtime_checkable
+class Registration(Protocol):
+    """Anything with ``name`` and ``register(source, target, *, init=None)``."""
+
+    name: str
+
+    def register(
+        self, source: np.ndarray, target: np.ndarray, *, init: np.ndarray | None = None
+    ) -> RegistrationResult: ...
+
+
+@runtime_checkable
+class PreparedRegistration(Registration, Protocol):
+    """A registration that can precompute per-cloud data once and reuse it."""
+
+    def prepare(self, points: np.ndarray) -> Any: ...
+
+    def register_prepared(
+        self, source: Any, target: Any, *, init: np.ndarray | None = None
+    ) -> RegistrationResult: ...
+
+
+# prefix -> (factory(spec, **options) -> Registration, description, needs_extra)
+_REGISTRY: dict[str, tuple[Callable[..., Registration], str, str | None]] = {}
+_EXAMPLES: dict[str, list[str]] = {}
+
+
+def register_method(
+    prefix: str, description: str, *, extra: str | None = None, examples: list[str] | None = None
+) -> Callable[[Callable[..., Registration]], Callable[..., Registration]]:
+    """Register a factory ``factory(spec: str | None, **options)`` for the method ``prefix``.
+
+    ``extra`` names the optional-dependency extra the method needs (e.g. ``"baselines"``).
+    """
+
+    def deco(factory: Callable[..., Registration]) -> Callable[..., Registration]:
+        _REGISTRY[prefix] = (factory, description, extra)
+        _EXAMPLES[prefix] = examples or [prefix]
+        return factory
+
+    return deco
+
+
+def _load_all() -> None:
+    import importlib
+
+    for mod in ("feature", "icp", "sparse_icp", "super4pcs", "external"):
+        try:
+            importlib.import_module(f"relnav.registration.{mod}")
+        except ModuleNotFoundError as e:  # family not written yet in this build
+            if e.name != f"relnav.registration.{mod}":
+                raise
+
+
+def available_methods() -> dict[str, dict[str, Any]]:
+    """Registered method families: ``{prefix: {"description", "extra", "examples"}}``."""
+    _load_all()
+    return {
+        k: {"description": v[1], "extra": v[2], "examples": _EXAMPLES[k]}
+        for k, v in sorted(_REGISTRY.items())
+    }
+
+
+def get_registration(method: str, **options: Any) -> Registration:
+    """Build the registration named by ``method`` (e.g. ``"feature:hods+gcc+alphabeta"``).
+
+    Raises
+    ------
+    ConfigError
+        Unknown method family or bad spec/options.
+    """
+    _load_all()
+    prefix, _, spec = method.partition(":")
+    prefix = prefix.strip().lower()
+    if prefix not in _REGISTRY:
+        raise ConfigError(
+            f"unknown method {method!r}; families: {', '.join(sorted(_REGISTRY))} "
+            "(see `relnav methods`)"
+        )
+    factory = _REGISTRY[prefix][0]
+    try:
+        return factory(spec.strip() or None, **options)
+    except TypeError as e:
+        raise ConfigError(f"bad options for method {method!r}: {e}") from None
