@@ -28,7 +28,9 @@ EXACT_OPTS = {
 
 def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     dR = T_est[:3, :3].T @ T_true[:3, :3]
-    return float(np.rad2deg(rotation_angle(dR))), float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]))
+    return float(np.rad2deg(rotation_angle(dR))), float(
+        np.linalg.norm(T_est[:3, 3] - T_true[:3, 3])
+    )
 
 
 def _realistic(seed: int, n: int = 50, angle_deg: float = 2.0, trans_m: float = 0.05):
@@ -115,7 +117,7 @@ def sorted_problem():
         ("kalman", {"paper_literal": True}),
         ("kalman", {"paper_literal": True, "adaptive": "per_match", "sigma_w": 0.05}),
         ("hinf", {}),
-        ("hinf", {"theta": 50.0, "dt": 1e-3, "p0": 2.0}),
+        ("hinf", {"theta": 5.0, "dt": 1e-3, "p0": 2.0}),
         ("hinf", {"paper_literal": True, "adaptive": "per_match"}),
         ("alphabeta", {}),
         ("alphabeta", {"alpha": 1.2, "beta": 0.3, "dt": 0.5}),
@@ -139,6 +141,7 @@ def test_kernels_match_dense_numpy_reference(name, opts, sorted_problem):
         x_ref = _ref_nlms(a, b, g, np.zeros_like(g), 1.0)
     e = est.estimate(src, tgt, corr)
     assert e.status == "ok"
+    assert e.info.get("theta_halvings", 0) == 0
     np.testing.assert_allclose(e.info["x_raw"], x_ref, rtol=1e-8, atol=1e-10)
 
 
@@ -152,7 +155,7 @@ def test_kalman_covariance_matches_reference_P(sorted_problem):
     x_ref, P_ref = _ref_kalman(a, b, m, 1.0, 5e-3, 1.0, False)
     e = get_estimator("kalman").estimate(src, tgt, corr)
     np.testing.assert_allclose(
-        e.covariance, state_covariance_to_twist(x_ref, P_ref), rtol=1e-6, atol=1e-12
+        e.covariance, state_covariance_to_twist(x_ref, P_ref), rtol=1e-6, atol=1e-9
     )
 
 
@@ -174,9 +177,7 @@ def test_exact_recovery_of_random_rigid_transform(name):
         src = rng.uniform(-1.0, 1.0, (n, 3)) + np.array([10.0, 0.0, 0.0])
         T = random_transform(rng, max_translation=1.0)
         corr = Correspondences(np.arange(n), np.arange(n), rng.uniform(0.05, 0.3, n))
-        est = get_estimator(name, **EXACT_OPTS[name]).estimate(
-            src, transform_points(T, src), corr
-        )
+        est = get_estimator(name, **EXACT_OPTS[name]).estimate(src, transform_points(T, src), corr)
         assert est.status == "ok" and est.converged and est.n_used == n
         rot, trans = _errors(est.T_target_source, T)
         assert rot < 0.1, (seed, rot)
@@ -234,7 +235,7 @@ def test_output_is_a_proper_rotation_with_noise_and_outliers(name):
     rng = np.random.default_rng(5)
     src, tgt, corr, _ = _realistic(1, n=60)
     tgt = tgt + 0.01 * rng.normal(size=tgt.shape)
-    tgt[:10] = rng.uniform(-1, 1, (10, 3)) + [10.0, 0.0, 0.0]  # gross outliers
+    tgt[:10] = rng.uniform(-1, 1, (10, 3)) + np.array([10.0, 0.0, 0.0])  # gross outliers
     for opts in ({}, {"paper_literal": True} if name != "svd" else {"weights": "inverse"}):
         est = get_estimator(name, **opts).estimate(src, tgt, corr)
         if est.status != "ok":
@@ -288,16 +289,18 @@ def test_sdre_printed_riccati_has_zero_solution():
     assert float(sdre_xi(5e-3, 2.0, 5e-3, 1.0, include_q=False)) == 0.0
 
 
-def test_sdre_gain_scales_with_adaptive_factor():
+def test_sdre_gain_dependence_on_adaptive_factor():
+    """g(M) = Mξa/(M²ξ + r) vanishes for M → 0 and M → ∞ (not monotone; peak near M ≈ 1 for
+    σ_w_sdre = 0.5): the DARE gain does *not* favour good matches the way V_u = M σ_v² does."""
     est = get_estimator("sdre", sigma_w_sdre=0.5)
-    _, g = est.gains(np.array([0.01, 1.0, 10.0]))
-    assert g[0] > g[1] > g[2] > 0  # worse matches (larger M) → smaller steps
+    _, g = est.gains(np.array([1e-3, 1.0, 100.0]))
+    assert g[1] > 0.1 and g[0] < 1e-3 and g[2] < 1e-2
     _, g_paper = get_estimator("sdre").gains(np.array([1.0]))
     assert 1e-5 < g_paper[0] < 1e-4  # Paper 1's σ_w = 5e-3: tiny gain
 
 
 def test_hinf_existence_condition_halves_theta(caplog):
-    src, tgt, corr, T = _realistic(3)
+    src, tgt, corr, _ = _realistic(3)
     with caplog.at_level(logging.WARNING, logger="relnav.estimation.hinf"):
         est = get_estimator("hinf", theta=1e5, dt=1.0).estimate(src, tgt, corr)
     assert est.status == "ok"
@@ -320,7 +323,7 @@ def test_hinf_is_nearly_kalman_at_paper_values():
 
 
 def test_refit_t_is_consistent_with_projected_rotation():
-    src, tgt, corr, T = _realistic(5)
+    src, tgt, corr, _ = _realistic(5)
     est = get_estimator("kalman", refit_t=True).estimate(src, tgt, corr)
     # T_source_target = inverse; its t must equal mean(b − R a)
     Tst = np.linalg.inv(est.T_target_source)
@@ -348,7 +351,9 @@ def test_warm_start_keeps_previous_estimate(name):
     second = est.estimate(src, tgt, corr)
     assert _errors(second.T_target_source, T)[0] < _errors(first.T_target_source, T)[0]
     est.reset()
-    np.testing.assert_array_equal(est.estimate(src, tgt, corr).T_target_source, first.T_target_source)
+    np.testing.assert_array_equal(
+        est.estimate(src, tgt, corr).T_target_source, first.T_target_source
+    )
     # a degenerate pair does not overwrite the stored state
     est.reset()
     est.estimate(src, tgt, corr)
@@ -362,7 +367,9 @@ def test_cold_start_does_not_carry_state():
     src, tgt, corr, _ = _realistic(8)
     est = get_estimator("alphabeta")
     first = est.estimate(src, tgt, corr)
-    np.testing.assert_array_equal(est.estimate(src, tgt, corr).T_target_source, first.T_target_source)
+    np.testing.assert_array_equal(
+        est.estimate(src, tgt, corr).T_target_source, first.T_target_source
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -405,7 +412,9 @@ def test_alphabeta_literal_printed_recursion_by_hand():
         xk = xk + alpha * r
         v = v - 2.0 / dt * xk
         xs.append(xk)
-    e = get_estimator("alphabeta", paper_literal=True, adaptive="per_match").estimate(src, tgt, corr)
+    e = get_estimator("alphabeta", paper_literal=True, adaptive="per_match").estimate(
+        src, tgt, corr
+    )
     assert e.info["x_raw"][0] == pytest.approx(xs[-1], rel=1e-12)
 
 
@@ -416,5 +425,6 @@ def test_kalman_hinf_literal_shrink_towards_model_scale(name):
     e = get_estimator(name, paper_literal=True).estimate(src, tgt, corr)
     assert e.status == "ok"
     x = np.asarray(e.info["x_raw"])
-    m_sum = 10.0 * corr.distance.sum()
-    assert np.linalg.norm(x[:9].reshape(3, 3)) < 3.0 / m_sum * 5  # far from a rotation
+    m_sum = 10.0 * corr.distance.sum()  # ≈ 94
+    # ‖R̂‖_F ≈ ‖R‖_F / M = √3 / M (the SO(3) projection is scale-free, so R is still usable)
+    assert 0.8 * np.sqrt(3) < np.linalg.norm(x[:9]) * m_sum < 1.2 * np.sqrt(3)

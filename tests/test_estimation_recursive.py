@@ -20,7 +20,14 @@ from relnav.estimation._recursive import (
     transform_to_state,
 )
 from relnav.geometry.rotations import rotation_angle, rotvec_to_matrix
-from relnav.geometry.se3 import exp_se3, from_rt, invert, log_se3, random_transform, transform_points
+from relnav.geometry.se3 import (
+    exp_se3,
+    from_rt,
+    invert,
+    log_se3,
+    random_transform,
+    transform_points,
+)
 from relnav.matching.correspondences import Correspondences
 
 FILTERS = ["kalman", "hinf", "alphabeta", "sdre"]
@@ -47,7 +54,9 @@ def _pair(rng: np.random.Generator, n: int = 30, T: np.ndarray | None = None):
 
 def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     dR = T_est[:3, :3].T @ T_true[:3, :3]
-    return float(np.rad2deg(rotation_angle(dR))), float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]))
+    return float(np.rad2deg(rotation_angle(dR))), float(
+        np.linalg.norm(T_est[:3, 3] - T_true[:3, 3])
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -93,7 +102,7 @@ def test_refit_t_formula(rng):
     R0 = rotvec_to_matrix(np.array([0.1, 0.2, -0.1]))
     x = np.concatenate([R0.ravel(), [5.0, 5.0, 5.0]])
     a_mean, b_mean = rng.normal(size=3), rng.normal(size=3)
-    R, t = project_state(x, refit_t=True, a_mean=a_mean, b_mean=b_mean)
+    _, t = project_state(x, refit_t=True, a_mean=a_mean, b_mean=b_mean)
     np.testing.assert_allclose(t, b_mean - R0 @ a_mean, atol=1e-12)
 
 
@@ -125,7 +134,9 @@ def test_adaptive_factors_modes():
     np.testing.assert_allclose(adaptive_factors(d, "per_match"), [1e-3, 0.5, 2.0])
     np.testing.assert_allclose(adaptive_factors(d, "sum"), [2.5, 2.5, 2.5])
     np.testing.assert_allclose(adaptive_factors(d, "none"), [1.0, 1.0, 1.0])
-    np.testing.assert_allclose(adaptive_factors(d, "per_match", scale=1.0, m_min=0.1), [0.1, 0.1, 0.2])
+    np.testing.assert_allclose(
+        adaptive_factors(d, "per_match", scale=1.0, m_min=0.1), [0.1, 0.1, 0.2]
+    )
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -204,7 +215,7 @@ def test_too_few_correspondences(name, n, rng):
 @pytest.mark.parametrize("name", ALL)
 def test_collinear_and_duplicate_points_are_degenerate(name, rng):
     T = random_transform(rng, max_translation=0.1)
-    line = np.outer(np.linspace(-1, 1, 25), [0.3, 1.0, -0.2]) + [10.0, 0.0, 0.0]
+    line = np.outer(np.linspace(-1, 1, 25), [0.3, 1.0, -0.2]) + np.array([10.0, 0.0, 0.0])
     corr = Correspondences(np.arange(25), np.arange(25), np.full(25, 0.1))
     _assert_flagged(
         get_estimator(name).estimate(line, transform_points(T, line), corr), "degenerate"
@@ -309,7 +320,8 @@ def test_state_covariance_jacobian_against_finite_log(rng):
     assert np.all(np.linalg.eigvalsh(C) > -1e-12)
 
 
-def test_kalman_covariance_is_consistent_monte_carlo():
+@pytest.mark.parametrize("opts", [{}, {"refit_t": True}, {"center": True}])
+def test_kalman_covariance_is_consistent_monte_carlo(opts):
     """Kalman (p0 large, σ_v = true noise, σ_w = 0): predicted twist covariance ≈ empirical.
 
     Left perturbation: T_true = exp(δ) T_est ⇒ δ = log(T_true T_est⁻¹).
@@ -320,7 +332,7 @@ def test_kalman_covariance_is_consistent_monte_carlo():
     T = from_rt(rotvec_to_matrix(np.deg2rad([3.0, -2.0, 1.0])), [0.1, 0.05, -0.02])
     tgt0 = transform_points(T, src0)
     corr = Correspondences(np.arange(n), np.arange(n), np.full(n, 0.1))
-    est = get_estimator("kalman", p0=1e8, sigma_v=sigma, sigma_w=0.0, adaptive="none")
+    est = get_estimator("kalman", p0=1e8, sigma_v=sigma, sigma_w=0.0, adaptive="none", **opts)
     errs, covs = [], []
     for _ in range(300):
         src = src0 + sigma * rng.normal(size=src0.shape)  # noise on the measurement ψ = b

@@ -14,7 +14,7 @@ from relnav.matching import (
     ransac_correspondences,
     ransac_search,
 )
-from relnav.matching.ransac import _kabsch_triangle, sample_triplets
+from relnav.matching.ransac import BATCH, _kabsch_triangle, sample_triplets
 
 NOISE = 0.002  # m, on the source points
 THETA = 0.02  # m, inlier threshold / epsilon (≈ 10 σ)
@@ -83,6 +83,35 @@ def test_ransac_recovers_transform_with_half_outliers(seed):
     kept = _kept_mask(corr, inliers)
     assert np.count_nonzero(kept & wrong) <= 0.02 * np.count_nonzero(wrong)
     assert np.count_nonzero(kept & ~wrong) >= 0.98 * np.count_nonzero(~wrong)
+
+
+def test_ransac_equals_plain_numpy_reference():
+    """Same samples (same seed), SVD Kabsch + full inlier counts, first best hypothesis."""
+    src, tgt, corr, _, _ = _problem(6, n_corr=120, outlier_frac=0.6)
+    n_it = 500
+    assert n_it <= BATCH  # a single batch: the reference draws the same samples
+    samples = sample_triplets(np.random.default_rng(21), len(corr), n_it)
+    s, m = src[corr.src_idx], tgt[corr.tgt_idx]
+    counts = []
+    for smp in samples:
+        a, b = s[smp], m[smp]
+        area = min(
+            0.5 * np.linalg.norm(np.cross(a[1] - a[0], a[2] - a[0])),
+            0.5 * np.linalg.norm(np.cross(b[1] - b[0], b[2] - b[0])),
+        )
+        if area < 1e-6:
+            counts.append(-1)
+            continue
+        T = kabsch(a, b)
+        counts.append(int(np.sum(np.linalg.norm(transform_points(T, s) - m, axis=1) < THETA)))
+    best = samples[int(np.argmax(counts))]
+    T0 = kabsch(s[best], m[best])
+    mask = np.linalg.norm(transform_points(T0, s) - m, axis=1) < THETA
+    r = ransac_search(src, tgt, corr, threshold=THETA, max_iter=n_it, seed=21)
+    assert r.success and counts.count(max(counts)) > 1  # the tie-break is exercised
+    np.testing.assert_array_equal(r.inlier_mask, mask)
+    np.testing.assert_allclose(r.T_target_source, kabsch(s[mask], m[mask]), atol=1e-12)
+    assert r.best_count == max(counts)
 
 
 def test_ransac_same_seed_same_result_and_recorded():

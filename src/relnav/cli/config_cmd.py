@@ -1,7 +1,77 @@
-"""(being written)"""
+"""``relnav config``: print scenario YAML (default or a preset) and list the presets."""
+
+from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
+from relnav.cli._common import console
+
+config_app = typer.Typer(
+    help="Scenario configuration: dump a YAML that relnav simulate accepts, list presets.",
+    no_args_is_help=True,
+    rich_markup_mode="rich",
+)
+
+
+@config_app.command("dump")
+def dump(
+    preset: str | None = typer.Option(
+        None, "--preset", help="Dump this preset instead of the default scenario."
+    ),
+    frames: int | None = typer.Option(None, "--frames", "-n", min=1, help="Number of frames."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Scenario seed."),
+    param: list[str] | None = typer.Option(
+        None, "--param", "-p", help="key=value preset option or dotted scenario key."
+    ),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file too."),
+) -> None:
+    """Print a complete scenario YAML (every default filled in).
+
+    Edit it and run it: [bold]relnav config dump --preset sim-orion > my.yaml[/] then
+    [bold]relnav simulate my.yaml --out seq[/].
+    """
+    from relnav.cli.simulate import _params, build_scenario
+    from relnav.sim.scenario import apply_overrides, default_scenario, load_scenario, scenario_yaml
+
+    if preset is None:
+        sc = default_scenario()
+        updates: dict[str, object] = {}
+        if frames is not None:
+            updates["frames"] = frames
+        if seed is not None:
+            updates["seed"] = seed
+        params = _params(param)
+        data = apply_overrides(sc.model_dump(mode="json"), {**params, **updates})
+        sc = load_scenario(data, check=False)
+    else:
+        sc = build_scenario(preset, frames=frames, seed=seed, params=_params(param))
+    text = scenario_yaml(sc)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text, encoding="utf-8")
+    typer.echo(text, nl=False)
+
+
+@config_app.command("list")
+def list_presets() -> None:
+    """List the scenario presets with their options and descriptions."""
+    from rich.table import Table
+
+    from relnav.sim.presets import available_presets, get_preset, preset_options
+
+    table = Table(title="scenario presets (relnav simulate NAME --out DIR)")
+    table.add_column("preset")
+    table.add_column("frames", justify="right")
+    table.add_column("options")
+    table.add_column("description")
+    for name in available_presets():
+        sc = get_preset(name)
+        table.add_row(name, str(sc.frames), ", ".join(preset_options(name)), sc.description)
+    console.print(table)
+
 
 def register(app: typer.Typer) -> None:
-    """Register this module's commands on ``app``."""
+    """Register ``relnav config dump|list`` on ``app``."""
+    app.add_typer(config_app, name="config")

@@ -300,6 +300,7 @@ def state_covariance_to_twist(
     refit_t: bool = False,
     a_mean: np.ndarray | None = None,
     b_mean: np.ndarray | None = None,
+    b_mean_cov: np.ndarray | None = None,
     rel_step: float = 1e-6,
 ) -> np.ndarray:
     """Map the 12×12 state covariance to the 6×6 twist covariance of ``T_target_source``.
@@ -312,8 +313,10 @@ def state_covariance_to_twist(
     exact for the derivative). Returns ``J P Jᵀ`` (symmetrised).
 
     The projection discards the non-rotational (stretch) directions of ``x[:9]``, so those parts
-    of ``P`` do not appear in the result. With ``refit_t`` only the rotation uncertainty is
-    propagated into ``t`` (the measurement noise of the refit itself is not included).
+    of ``P`` do not appear in the result. With ``refit_t`` (``t = b̄ − R ā``) the rotation
+    uncertainty is propagated into ``t``; ``b_mean_cov`` (3×3, covariance of ``b̄`` in the source
+    frame) adds the noise of the refit itself, ``Rᵀ Σ_b̄ R`` on the ``ρ`` block (the correlation
+    between ``b̄`` and ``R`` is neglected — it vanishes for a centred least-squares fit).
     """
     x = np.asarray(x, dtype=np.float64)
     T_hat = state_to_transform(x, refit_t=refit_t, a_mean=a_mean, b_mean=b_mean)
@@ -341,6 +344,9 @@ def state_covariance_to_twist(
     xi = _vee_first_order(dT)
     J = ((xi[:12] - xi[12:]) / (2.0 * h[:, None])).T  # (6, 12)
     C = J @ P @ J.T
+    if refit_t and b_mean_cov is not None:
+        R_hat = F_hat[:3, :3]
+        C[:3, :3] += R_hat.T @ np.asarray(b_mean_cov, dtype=np.float64) @ R_hat
     return 0.5 * (C + C.T)
 
 
@@ -450,13 +456,18 @@ def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def _spd_inverse(A: np.ndarray, L: np.ndarray, out: np.ndarray) -> bool:
-    """Inverse of a symmetric positive-definite matrix via Cholesky; False if not SPD."""
+def _spd_inverse(A: np.ndarray, L: np.ndarray, out: np.ndarray, Linv: np.ndarray) -> bool:
+    """Inverse of a symmetric positive-definite matrix via Cholesky; False if not SPD.
+
+    ``L`` and ``Linv`` are (n, n) workspaces (``Linv`` receives ``L⁻¹``, lower triangular).
+    """
     n = A.shape[0]
     if not _cholesky(A, L):
         return False
-    # invert L in place into Linv (lower) stored in out, then out = Linvᵀ Linv
-    Linv = np.zeros((n, n))
+    # Linv = L⁻¹ (lower), then out = Linvᵀ Linv
+    for i in range(n):
+        for j in range(i + 1, n):
+            Linv[i, j] = 0.0
     for i in range(n):
         Linv[i, i] = 1.0 / L[i, i]
         for j in range(i):
@@ -599,6 +610,11 @@ class RecursiveEstimator:
     def _options(self) -> dict[str, Any]:
         return {}
 
+    def _measurement_variance(self, m: np.ndarray) -> np.ndarray | None:
+        """Per-match measurement variance ``M_u σ_v²`` (m²) of the filter model, if it has one."""
+        sigma_v = getattr(self, "sigma_v", None)
+        return None if sigma_v is None else m * sigma_v**2
+
     # -- public --------------------------------------------------------------------------------
 
     def reset(self) -> None:
@@ -706,8 +722,12 @@ class RecursiveEstimator:
         rmse = float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
         cov: np.ndarray | None = None
         if self.covariance_mode == "filter" and out.P is not None:
+            b_cov = None
+            var = self._measurement_variance(m)
+            if self.refit_t and var is not None:
+                b_cov = float(var.sum()) / n**2 * np.eye(3)  # Cov(b̄) under V_u = var_u I₃
             cov = state_covariance_to_twist(
-                x, out.P, refit_t=self.refit_t, a_mean=a_mean, b_mean=b_mean
+                x, out.P, refit_t=self.refit_t, a_mean=a_mean, b_mean=b_mean, b_mean_cov=b_cov
             )
         elif self.covariance_mode == "residual":
             cov = residual_covariance(T, prep.b, prep.a)

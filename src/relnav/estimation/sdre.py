@@ -102,9 +102,7 @@ class SDREEstimator(RecursiveEstimator):
 
     name = "sdre"
 
-    def __init__(
-        self, *, sigma_w_sdre: float = 5e-3, sigma_v: float = 1.0, **kwargs: Any
-    ) -> None:
+    def __init__(self, *, sigma_w_sdre: float = 5e-3, sigma_v: float = 1.0, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.sigma_w_sdre = _check_positive("sigma_w_sdre", sigma_w_sdre)
         self.sigma_v = _check_positive("sigma_v", sigma_v)

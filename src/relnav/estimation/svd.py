@@ -43,7 +43,8 @@ class SVDEstimator:
     min_correspondences : int
         Default 3.
     collinear_tol, coplanar_tol : float
-        Relative singular-value thresholds (see :func:`~relnav.estimation._recursive.check_geometry`).
+        Relative singular-value thresholds (see
+        :func:`~relnav.estimation._recursive.check_geometry`).
     reject_coplanar : bool
         Flag coplanar correspondences as degenerate too (default False).
     covariance : {"residual", "none"}

@@ -55,7 +55,7 @@ def rops_rotations(n_rotations: int = 3) -> np.ndarray:
     return np.ascontiguousarray(rotvec_to_matrix(rv).reshape(-1, 3, 3))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rops_kernel(
     P: np.ndarray,
     kp: np.ndarray,
@@ -74,7 +74,7 @@ def _rops_kernel(
     D = R * 3 * 5
     out = np.full((K, D), np.nan)
     B = n_bins
-    dist = np.zeros((B, B))
+    dist = np.zeros((3, B, B))
     for k in range(K):
         s0 = offsets[k]
         n = offsets[k + 1] - s0
@@ -91,6 +91,7 @@ def _rops_kernel(
             for i in range(3):
                 loc[t, i] = L[i, 0] * v0 + L[i, 1] * v1 + L[i, 2] * v2
         rot = np.empty((n, 3))
+        cell = np.empty((n, 3), dtype=np.int64)
         lo = np.empty(3)
         hi = np.empty(3)
         col = 0
@@ -106,35 +107,29 @@ def _rops_kernel(
                         lo[i] = c
                     if c > hi[i]:
                         hi[i] = c
+            # bin index of every point along each axis of the 3D bounding box (PCL: bin length
+            # = extent / L, last bin closed); a zero extent puts everything in bin 0
+            for i in range(3):
+                ext = hi[i] - lo[i]
+                if ext > zero_extent:
+                    blen = ext / B
+                    for t in range(n):
+                        c = int((rot[t, i] - lo[i]) / blen)
+                        cell[t, i] = B - 1 if c > B - 1 else (0 if c < 0 else c)
+                else:
+                    cell[:, i] = 0
+            dist[:, :, :] = 0.0
+            for t in range(n):
+                for pj in range(3):
+                    dist[pj, cell[t, proj[pj, 0]], cell[t, proj[pj, 1]]] += 1.0
             for pj in range(3):
-                a = proj[pj, 0]
-                b = proj[pj, 1]
-                ext_a = hi[a] - lo[a]
-                ext_b = hi[b] - lo[b]
-                dist[:, :] = 0.0
-                for t in range(n):
-                    row = 0
-                    if ext_a > zero_extent:
-                        row = int((rot[t, a] - lo[a]) / (ext_a / B))
-                        if row > B - 1:
-                            row = B - 1
-                        elif row < 0:
-                            row = 0
-                    cc = 0
-                    if ext_b > zero_extent:
-                        cc = int((rot[t, b] - lo[b]) / (ext_b / B))
-                        if cc > B - 1:
-                            cc = B - 1
-                        elif cc < 0:
-                            cc = 0
-                    dist[row, cc] += 1.0
                 mean_i = 0.0
                 mean_j = 0.0
                 for i in range(B):
                     for j in range(B):
-                        dist[i, j] /= n
-                        mean_i += (i + 1) * dist[i, j]
-                        mean_j += (j + 1) * dist[i, j]
+                        dist[pj, i, j] /= n
+                        mean_i += (i + 1) * dist[pj, i, j]
+                        mean_j += (j + 1) * dist[pj, i, j]
                 m11 = 0.0
                 m21 = 0.0
                 m12 = 0.0
@@ -143,7 +138,7 @@ def _rops_kernel(
                 for i in range(B):
                     fi = (i + 1) - mean_i
                     for j in range(B):
-                        d = dist[i, j]
+                        d = dist[pj, i, j]
                         if d > 0.0:
                             fj = (j + 1) - mean_j
                             m11 += fi * fj * d

@@ -85,7 +85,7 @@ def spin_grid(
     raise ConfigError(f"unknown spin image layout {layout!r}; use 'guo' or 'pcl'")
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _spin_kernel(
     P: np.ndarray,
     kp: np.ndarray,
@@ -141,20 +141,28 @@ def _spin_kernel(
                 u = (alpha - a0) / da
                 w = (beta - b0) / db
                 if bilinear:
-                    j0 = int(np.floor(u))
-                    i0 = int(np.floor(w))
-                    fu = u - j0
-                    fw = w - i0
-                    for di in range(2):
-                        ii = min(max(i0 + di, 0), nb - 1)
-                        wi = fw if di == 1 else 1.0 - fw
-                        for dj in range(2):
-                            jj = min(max(j0 + dj, 0), na - 1)
-                            wj = fu if dj == 1 else 1.0 - fu
-                            img[ii, jj] += wi * wj
+                    fj = np.floor(u)
+                    fi = np.floor(w)
+                    fu = u - fj
+                    fw = w - fi
+                    j0 = int(fj)
+                    i0 = int(fi)
+                    j1 = j0 + 1
+                    i1 = i0 + 1
+                    # weights falling outside the grid go to the nearest edge cell
+                    j0 = 0 if j0 < 0 else (na - 1 if j0 > na - 1 else j0)
+                    j1 = 0 if j1 < 0 else (na - 1 if j1 > na - 1 else j1)
+                    i0 = 0 if i0 < 0 else (nb - 1 if i0 > nb - 1 else i0)
+                    i1 = 0 if i1 < 0 else (nb - 1 if i1 > nb - 1 else i1)
+                    img[i0, j0] += (1.0 - fw) * (1.0 - fu)
+                    img[i0, j1] += (1.0 - fw) * fu
+                    img[i1, j0] += fw * (1.0 - fu)
+                    img[i1, j1] += fw * fu
                 else:
-                    jj = min(max(int(np.floor(u + 0.5)), 0), na - 1)
-                    ii = min(max(int(np.floor(w + 0.5)), 0), nb - 1)
+                    jj = int(np.floor(u + 0.5))
+                    ii = int(np.floor(w + 0.5))
+                    jj = 0 if jj < 0 else (na - 1 if jj > na - 1 else jj)
+                    ii = 0 if ii < 0 else (nb - 1 if ii > nb - 1 else ii)
                     img[ii, jj] += 1.0
                 total += 1.0
             if total <= 0.0:

@@ -8,8 +8,6 @@ unit axes ``x, y, z`` expressed in the cloud frame, so the local coordinates of 
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
@@ -28,18 +26,99 @@ def _support_csr(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Radius neighbourhoods of the keypoints as CSR arrays ``(flat, offsets)``.
 
-    ``flat[offsets[k]:offsets[k + 1]]`` are the (sorted) indices of the points within ``radius``
-    (inclusive) of ``points[keypoint_idx[k]]``, the keypoint itself included.
+    ``flat[offsets[k]:offsets[k + 1]]`` are the indices of the points with
+    ``‖q − p_k‖ ≤ radius`` (keypoint included), in a deterministic order. Without ``tree`` a
+    numba uniform grid (cell = ``radius``) is used; with ``tree`` (or when the grid would need
+    more than 2⁶² cells) the kd-tree's ``sparse_distance_matrix``.
     """
-    tree = tree if tree is not None else build_tree(points)
-    K = keypoint_idx.shape[0]
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    kp = np.ascontiguousarray(keypoint_idx, dtype=np.int64)
+    K = kp.shape[0]
+    if K == 0 or P.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(K + 1, dtype=np.int64)
+    if tree is None:
+        dims = np.floor((P.max(axis=0) - P.min(axis=0)) / radius) + 1.0
+        if float(np.prod(dims)) < 2.0**62:
+            return _grid_csr(P, kp, float(radius))
+        tree = build_tree(P)
+    kp_tree = tree if (K == P.shape[0] and np.array_equal(kp, np.arange(K))) else build_tree(P[kp])
+    pairs = kp_tree.sparse_distance_matrix(tree, radius, output_type="ndarray")
+    return _group_csr(pairs["i"].astype(np.int64), pairs["j"].astype(np.int64), K)
+
+
+@njit(cache=True)
+def _group_csr(owner: np.ndarray, idx: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray]:
+    """Counting sort of ``idx`` by ``owner`` (stable) → ``(flat, offsets)``."""
     offsets = np.zeros(K + 1, dtype=np.int64)
-    if K == 0:
-        return np.zeros(0, dtype=np.int64), offsets
-    lists = tree.query_ball_point(points[keypoint_idx], r=radius, return_sorted=True)
-    lens = np.fromiter((len(li) for li in lists), dtype=np.int64, count=K)
-    np.cumsum(lens, out=offsets[1:])
-    flat = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(offsets[-1]))
+    for t in range(owner.shape[0]):
+        offsets[owner[t] + 1] += 1
+    for k in range(K):
+        offsets[k + 1] += offsets[k]
+    fill = offsets[:-1].copy()
+    flat = np.empty(owner.shape[0], dtype=np.int64)
+    for t in range(owner.shape[0]):
+        flat[fill[owner[t]]] = idx[t]
+        fill[owner[t]] += 1
+    return flat, offsets
+
+
+@njit(cache=True)
+def _grid_csr(P: np.ndarray, kp: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray]:
+    """Radius search on a uniform grid of cell ``r``: CSR ``(flat, offsets)`` (see caller)."""
+    N = P.shape[0]
+    K = kp.shape[0]
+    lo = np.empty(3)
+    dims = np.empty(3, dtype=np.int64)
+    for a in range(3):
+        lo[a] = P[:, a].min()
+        dims[a] = int(np.floor((P[:, a].max() - lo[a]) / r)) + 1
+    cell = np.empty((N, 3), dtype=np.int64)
+    key = np.empty(N, dtype=np.int64)
+    for i in range(N):
+        for a in range(3):
+            c = int(np.floor((P[i, a] - lo[a]) / r))
+            cell[i, a] = min(max(c, 0), dims[a] - 1)
+        key[i] = (cell[i, 0] * dims[1] + cell[i, 1]) * dims[2] + cell[i, 2]
+    order = np.argsort(key, kind="mergesort")
+    skey = key[order]
+    r2 = r * r
+    counts = np.zeros(K, dtype=np.int64)
+    offsets = np.zeros(K + 1, dtype=np.int64)
+    flat = np.empty(0, dtype=np.int64)
+    for sweep in range(2):
+        if sweep == 1:
+            for k in range(K):
+                offsets[k + 1] = offsets[k] + counts[k]
+            flat = np.empty(offsets[K], dtype=np.int64)
+        for k in range(K):
+            qi = kp[k]
+            pos = offsets[k]
+            n = 0
+            for dx in range(-1, 2):
+                cx = cell[qi, 0] + dx
+                if cx < 0 or cx >= dims[0]:
+                    continue
+                for dy in range(-1, 2):
+                    cy = cell[qi, 1] + dy
+                    if cy < 0 or cy >= dims[1]:
+                        continue
+                    for dz in range(-1, 2):
+                        cz = cell[qi, 2] + dz
+                        if cz < 0 or cz >= dims[2]:
+                            continue
+                        kk = (cx * dims[1] + cy) * dims[2] + cz
+                        s0 = np.searchsorted(skey, kk, side="left")
+                        s1 = np.searchsorted(skey, kk, side="right")
+                        for t in range(s0, s1):
+                            j = order[t]
+                            e0 = P[j, 0] - P[qi, 0]
+                            e1 = P[j, 1] - P[qi, 1]
+                            e2 = P[j, 2] - P[qi, 2]
+                            if e0 * e0 + e1 * e1 + e2 * e2 <= r2:
+                                if sweep == 1:
+                                    flat[pos + n] = j
+                                n += 1
+            counts[k] = n
     return flat, offsets
 
 
@@ -485,7 +564,7 @@ def _radius_csr_kernel(pts: np.ndarray, queries: np.ndarray, r: float, sort: boo
             d2[tot : tot + m] = d2[tot : tot + m][o]
         tot += m
         offsets[k + 1] = tot
-    return offsets, idx[:tot].copy(), d2[:tot].copy()
+    return offsets, idx[:tot], d2[:tot]
 
 
 def radius_search(
@@ -526,7 +605,135 @@ def radius_search(
 
 
 @njit(cache=True)
-def _shot_lrf_kernel(
+def _shot_lrf_one(
+    P: np.ndarray,
+    p: np.ndarray,
+    nbr: np.ndarray,
+    d2: np.ndarray,
+    m: int,
+    radius: float,
+    min_nb: int,
+    V: np.ndarray,
+    vd2: np.ndarray,
+    vid: np.ndarray,
+    frame: np.ndarray,
+    ties: np.ndarray,
+) -> bool:
+    """SHOT LRF of keypoint ``p`` from its ``m`` neighbours ``nbr[:m]`` (squared distances
+    ``d2[:m]``, any order). Fills ``frame`` (rows x, y, z) and ``ties`` (whether the sign of
+    ``x`` / ``z`` came from the median tie-break); returns False when the frame is undefined.
+    ``V`` (N, 3), ``vd2`` (N,), ``vid`` (N,) are scratch buffers.
+    """
+    ties[0] = False
+    ties[1] = False
+    nv = 0
+    c00 = 0.0
+    c01 = 0.0
+    c02 = 0.0
+    c11 = 0.0
+    c12 = 0.0
+    c22 = 0.0
+    wsum = 0.0
+    for t in range(m):
+        if d2[t] == 0.0:  # the keypoint itself and its exact duplicates
+            continue
+        j = nbr[t]
+        v0 = P[j, 0] - p[0]
+        v1 = P[j, 1] - p[1]
+        v2 = P[j, 2] - p[2]
+        w = radius - np.sqrt(d2[t])
+        V[nv, 0] = v0
+        V[nv, 1] = v1
+        V[nv, 2] = v2
+        vd2[nv] = d2[t]
+        vid[nv] = j
+        c00 += w * v0 * v0
+        c01 += w * v0 * v1
+        c02 += w * v0 * v2
+        c11 += w * v1 * v1
+        c12 += w * v1 * v2
+        c22 += w * v2 * v2
+        wsum += w
+        nv += 1
+    if nv < min_nb or not (wsum > 0.0):
+        return False
+    C = np.empty((3, 3))
+    C[0, 0] = c00 / wsum
+    C[0, 1] = c01 / wsum
+    C[0, 2] = c02 / wsum
+    C[1, 1] = c11 / wsum
+    C[1, 2] = c12 / wsum
+    C[2, 2] = c22 / wsum
+    C[1, 0] = C[0, 1]
+    C[2, 0] = C[0, 2]
+    C[2, 1] = C[1, 2]
+    if not np.isfinite(C).all():
+        return False
+    evals, evecs = np.linalg.eigh(C)  # ascending
+    if not np.isfinite(evals).all():
+        return False
+    axes = np.empty((2, 3))
+    axes[0] = evecs[:, 2]  # x: largest eigenvalue
+    axes[1] = evecs[:, 0]  # z: smallest eigenvalue
+    for a in range(2):
+        ax0 = axes[a, 0]
+        ax1 = axes[a, 1]
+        ax2 = axes[a, 2]
+        plus = 0
+        for i in range(nv):
+            plus += V[i, 0] * ax0 + V[i, 1] * ax1 + V[i, 2] * ax2 >= 0.0
+        D = 2 * plus - nv
+        if D == 0:
+            # PCL: the 5 neighbours around the median of the distance-sorted list decide
+            ties[a] = True
+            o = _argsort_d2_idx(vd2[:nv], vid[:nv])
+            med = nv // 2
+            cnt = 0
+            for i in range(-2, 3):
+                r_ = o[med - i]
+                if V[r_, 0] * ax0 + V[r_, 1] * ax1 + V[r_, 2] * ax2 > 0.0:
+                    cnt += 1
+            if cnt < 3:
+                axes[a] = -axes[a]
+        elif D < 0:
+            axes[a] = -axes[a]
+    x = axes[0]
+    z = axes[1]
+    frame[0] = x
+    frame[1, 0] = z[1] * x[2] - z[2] * x[1]
+    frame[1, 1] = z[2] * x[0] - z[0] * x[2]
+    frame[1, 2] = z[0] * x[1] - z[1] * x[0]
+    frame[2] = z
+    return True
+
+
+@njit(cache=True)
+def _shot_lrf_kernel(P: np.ndarray, kp: np.ndarray, radius: float, min_nb: int):
+    """SHOT LRFs ``(K, 3, 3)`` and tie flags ``(K, 2)`` with a grid radius search."""
+    n = P.shape[0]
+    K = kp.shape[0]
+    out = np.full((K, 3, 3), np.nan)
+    ties = np.zeros((K, 2), dtype=np.bool_)
+    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
+    bi = np.empty(n, dtype=np.int64)
+    bd = np.empty(n)
+    V = np.empty((n, 3))
+    vd2 = np.empty(n)
+    vid = np.empty(n, dtype=np.int64)
+    frame = np.empty((3, 3))
+    tie = np.zeros(2, dtype=np.bool_)
+    for k in range(K):
+        p = P[kp[k]]
+        m = _grid_query(spts, lo, h, dims, start, sidx, p, radius, bi, bd)
+        if _shot_lrf_one(P, p, bi, bd, m, radius, min_nb, V, vd2, vid, frame, tie):
+            out[k] = frame
+            ties[k, 0] = tie[0]
+            ties[k, 1] = tie[1]
+    return out, ties
+
+
+@njit(cache=True)
+def _shot_lrf_kernel_csr(
     P: np.ndarray,
     kp: np.ndarray,
     offsets: np.ndarray,
@@ -535,103 +742,38 @@ def _shot_lrf_kernel(
     radius: float,
     min_nb: int,
 ):
-    """SHOT LRF per keypoint from CSR neighbourhoods (any order; sorted here on ties).
-
-    Returns ``(lrf (K, 3, 3), ties (K, 2) bool)``; ``ties[k]`` tells whether the sign of ``x``
-    / ``z`` was decided by the median tie-break (``D == 0``) rather than the majority.
-    """
+    """As :func:`_shot_lrf_kernel` on precomputed CSR neighbourhoods."""
+    n = P.shape[0]
     K = kp.shape[0]
     out = np.full((K, 3, 3), np.nan)
     ties = np.zeros((K, 2), dtype=np.bool_)
-    cap = 16
+    V = np.empty((n, 3))
+    vd2 = np.empty(n)
+    vid = np.empty(n, dtype=np.int64)
+    frame = np.empty((3, 3))
+    tie = np.zeros(2, dtype=np.bool_)
     for k in range(K):
-        cap = max(cap, offsets[k + 1] - offsets[k])
-    V = np.empty((cap, 3))
-    vd2 = np.empty(cap)
-    vid = np.empty(cap, dtype=np.int64)
-    C = np.zeros((3, 3))
-    for k in range(K):
-        p = P[kp[k]]
-        nv = 0
-        C[:, :] = 0.0
-        wsum = 0.0
-        for t in range(offsets[k], offsets[k + 1]):
-            if d2[t] == 0.0:  # the keypoint itself and its exact duplicates
-                continue
-            j = nbr[t]
-            v0 = P[j, 0] - p[0]
-            v1 = P[j, 1] - p[1]
-            v2 = P[j, 2] - p[2]
-            w = radius - np.sqrt(d2[t])
-            V[nv, 0] = v0
-            V[nv, 1] = v1
-            V[nv, 2] = v2
-            vd2[nv] = d2[t]
-            vid[nv] = j
-            C[0, 0] += w * v0 * v0
-            C[0, 1] += w * v0 * v1
-            C[0, 2] += w * v0 * v2
-            C[1, 1] += w * v1 * v1
-            C[1, 2] += w * v1 * v2
-            C[2, 2] += w * v2 * v2
-            wsum += w
-            nv += 1
-        if nv < min_nb or not (wsum > 0.0):
-            continue
-        C[1, 0] = C[0, 1]
-        C[2, 0] = C[0, 2]
-        C[2, 1] = C[1, 2]
-        C /= wsum
-        if not np.isfinite(C).all():
-            continue
-        evals, evecs = np.linalg.eigh(C)  # ascending
-        if not np.isfinite(evals).all():
-            continue
-        axes = np.empty((2, 3))
-        axes[0] = evecs[:, 2]  # x: largest eigenvalue
-        axes[1] = evecs[:, 0]  # z: smallest eigenvalue
-        for a in range(2):
-            ax = axes[a]
-            plus = 0
-            for i in range(nv):
-                if V[i, 0] * ax[0] + V[i, 1] * ax[1] + V[i, 2] * ax[2] >= 0.0:
-                    plus += 1
-            D = 2 * plus - nv
-            if D == 0:
-                # PCL: the 5 neighbours around the median of the distance-sorted list decide
-                ties[k, a] = True
-                o = _argsort_d2_idx(vd2[:nv], vid[:nv])
-                med = nv // 2
-                cnt = 0
-                for i in range(-2, 3):
-                    r_ = o[med - i]
-                    if V[r_, 0] * ax[0] + V[r_, 1] * ax[1] + V[r_, 2] * ax[2] > 0.0:
-                        cnt += 1
-                if cnt < 3:
-                    axes[a] = -ax
-            elif D < 0:
-                axes[a] = -ax
-        x = axes[0]
-        z = axes[1]
-        out[k, 0] = x
-        out[k, 1, 0] = z[1] * x[2] - z[2] * x[1]
-        out[k, 1, 1] = z[2] * x[0] - z[0] * x[2]
-        out[k, 1, 2] = z[0] * x[1] - z[1] * x[0]
-        out[k, 2] = z
+        s0 = offsets[k]
+        m = offsets[k + 1] - s0
+        if _shot_lrf_one(
+            P, P[kp[k]], nbr[s0:], d2[s0:], m, radius, min_nb, V, vd2, vid, frame, tie
+        ):
+            out[k] = frame
+            ties[k, 0] = tie[0]
+            ties[k, 1] = tie[1]
     return out, ties
 
 
 def _shot_lrf_full(
     P: np.ndarray, kp: np.ndarray, radius: float, tree: cKDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`shot_lrf` returning ``(lrf, ties)`` (see :func:`_shot_lrf_kernel`)."""
+    """:func:`shot_lrf` returning ``(lrf, ties)``; ``ties[k]`` flags median tie-breaks."""
     if tree is None:
-        offsets, nbr, d2 = _radius_csr_kernel(P, P[kp], radius, False)
-    else:
-        nbr, offsets = _support_csr(P, kp, radius, tree)
-        owner = np.repeat(np.arange(kp.size), np.diff(offsets))
-        d2 = np.sum((P[nbr] - P[kp][owner]) ** 2, axis=1)
-    return _shot_lrf_kernel(P, kp, offsets, nbr, d2, radius, SHOT_MIN_NEIGHBORS)
+        return _shot_lrf_kernel(P, kp, radius, SHOT_MIN_NEIGHBORS)
+    nbr, offsets = _support_csr(P, kp, radius, tree)
+    owner = np.repeat(np.arange(kp.size), np.diff(offsets))
+    d2 = np.sum((P[nbr] - P[kp][owner]) ** 2, axis=1)
+    return _shot_lrf_kernel_csr(P, kp, offsets, nbr, d2, radius, SHOT_MIN_NEIGHBORS)
 
 
 def shot_lrf(

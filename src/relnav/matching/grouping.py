@@ -96,8 +96,17 @@ def get_grouper(name: str, **options: Any) -> Grouper:
 
 @dataclass(kw_only=True)
 class _Tolerance:
-    """Shared ``epsilon`` / ``epsilon_factor`` handling."""
+    """Shared ``epsilon`` / ``epsilon_factor`` handling.
 
+    Parameters
+    ----------
+    epsilon : float, optional
+        Absolute tolerance in metres; overrides ``epsilon_factor``.
+    epsilon_factor : float
+        Tolerance in multiples of the resolution passed to ``select`` (Paper 1: 2).
+    """
+
+    name: str = field(default="", init=False)
     epsilon: float | None = None
     epsilon_factor: float = 2.0
 
@@ -120,13 +129,15 @@ class _Tolerance:
             )
         return float(self.epsilon_factor) * float(resolution)
 
-    name: str = field(default="", init=False)
-
 
 @register_grouper("gcc", "geometric consistency grouping, largest cluster (Chen & Bhanu 2007)")
 @dataclass(kw_only=True)
 class GccGrouper(_Tolerance):
-    """GCC (ALGORITHMS §B.2): :func:`~relnav.matching.gcc.geometric_consistency_grouping`."""
+    """GCC (ALGORITHMS §B.2): :func:`~relnav.matching.gcc.geometric_consistency_grouping`.
+
+    Options: ``epsilon`` / ``epsilon_factor`` (ε), ``min_cluster_size`` (3), ``pcl_bug``,
+    ``strict`` — see that function.
+    """
 
     min_cluster_size: int = 3
     pcl_bug: bool = False
@@ -177,7 +188,12 @@ class GccGrouper(_Tolerance):
 @register_grouper("ransac", "3-point RANSAC on correspondences, inliers of the best hypothesis")
 @dataclass(kw_only=True)
 class RansacGrouper(_Tolerance):
-    """RANSAC (ALGORITHMS §B.3); the threshold θ is the tolerance (default ``2·Tr``)."""
+    """RANSAC (ALGORITHMS §B.3): :func:`~relnav.matching.ransac.ransac_search`.
+
+    Options: ``epsilon`` / ``epsilon_factor`` (θ, default ``2·Tr``), ``max_iter`` (50 000),
+    ``adaptive``, ``confidence``, ``min_area``, ``seed``. ``info["T_target_source"]`` holds the
+    transform re-fitted on the inliers.
+    """
 
     max_iter: int = 50_000
     adaptive: bool = False
@@ -231,7 +247,11 @@ class RansacGrouper(_Tolerance):
 @register_grouper("clgv", "local and global voting (Buch et al. 2014) [interpretation]")
 @dataclass(kw_only=True)
 class ClgvGrouper(_Tolerance):
-    """CLGV (ALGORITHMS §B.4, **[interpretation]**): :func:`~relnav.matching.clgv.clgv_vote`."""
+    """CLGV (ALGORITHMS §B.4, **[interpretation]**): :func:`~relnav.matching.clgv.clgv_vote`.
+
+    Options: ``epsilon`` / ``epsilon_factor`` (ε), ``k``, ``n_hypotheses``, ``top_fraction``,
+    ``keep_ratio``, ``seed``.
+    """
 
     k: int = 10
     n_hypotheses: int = 1000

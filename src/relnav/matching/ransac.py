@@ -6,7 +6,8 @@ by Kabsch/SVD, and the hypothesis with the most inliers ``‖R s + t − m‖ < 
 earliest hypothesis). The winner is re-estimated by Kabsch on all its inliers.
 
 Samples are drawn with NumPy's generator in fixed-size batches (so results depend only on
-``seed``, not on timing), and each batch is scored by a numba kernel (closed-form 3-point Kabsch + inlier count).
+``seed``, not on timing), and each batch is scored by a numba kernel (closed-form 3-point
+Kabsch + inlier count).
 """
 
 from __future__ import annotations
@@ -185,7 +186,9 @@ def _tri_area(p: np.ndarray, a: int, b: int, c: int) -> float:
 
 
 @njit(cache=True)
-def _count_inliers(s, m, R, t, thr2):
+def _count_inliers(s, m, R, t, thr2, stop_at):
+    """Inliers of ``(R, t)``; gives up (returning a count ``<= stop_at``) once the count
+    can no longer exceed ``stop_at``."""
     n = s.shape[0]
     cnt = 0
     for i in range(n):
@@ -194,16 +197,24 @@ def _count_inliers(s, m, R, t, thr2):
         ez = R[2, 0] * s[i, 0] + R[2, 1] * s[i, 1] + R[2, 2] * s[i, 2] + t[2] - m[i, 2]
         if ex * ex + ey * ey + ez * ez < thr2:
             cnt += 1
+        elif cnt + (n - 1 - i) <= stop_at:
+            return cnt
     return cnt
 
 
 @njit(cache=True)
-def _score_batch(s, m, samples, thr2, min_area):
-    """Inlier count per hypothesis (``-1`` for degenerate samples)."""
+def _score_batch(s, m, samples, thr2, min_area, best_so_far):
+    """Inlier count per hypothesis (``-1`` for degenerate samples).
+
+    Counting stops early once a hypothesis cannot beat the best count so far (earlier
+    batches included); such a truncated count is below that best, so the earliest
+    hypothesis with the maximal count is still identified exactly.
+    """
     B = samples.shape[0]
     counts = np.empty(B, dtype=np.int64)
     R = np.empty((3, 3))
     t = np.empty(3)
+    best = best_so_far
     for b in range(B):
         a0 = samples[b, 0]
         a1 = samples[b, 1]
@@ -212,7 +223,10 @@ def _score_batch(s, m, samples, thr2, min_area):
             counts[b] = -1
             continue
         _kabsch_triangle(s, m, a0, a1, a2, R, t)
-        counts[b] = _count_inliers(s, m, R, t, thr2)
+        c = _count_inliers(s, m, R, t, thr2, best)
+        counts[b] = c
+        if c > best:
+            best = c
     return counts
 
 
@@ -320,7 +334,7 @@ def ransac_search(
     while n_iter < target_iter:
         size = min(BATCH, target_iter - n_iter)
         samples = sample_triplets(rng, n, size)
-        counts = _score_batch(s, m, samples, thr2, float(min_area))
+        counts = _score_batch(s, m, samples, thr2, float(min_area), best_count)
         if adaptive:
             # Sequential semantics: stop at the first hypothesis after which the running
             # best inlier ratio says enough iterations have been drawn.

@@ -65,6 +65,7 @@ __all__ = [
     "load_scenario",
     "resolve_scenario",
     "scenario_poses",
+    "scenario_yaml",
     "simulate",
 ]
 
@@ -339,6 +340,7 @@ def load_scenario(
     *,
     overrides: dict[str, Any] | None = None,
     check: bool = True,
+    label: str | None = None,
 ) -> Scenario:
     """Validate a scenario from a YAML file, a dict or a :class:`Scenario`.
 
@@ -353,6 +355,8 @@ def load_scenario(
         trajectory and the attitude once, so that every configuration error surfaces here as a
         :class:`ConfigError` rather than mid-simulation. The target mesh is not loaded, but a
         mesh path must exist.
+    label : str, optional
+        Name used in error messages (default: the file path or ``"scenario"``).
 
     Raises
     ------
@@ -361,16 +365,17 @@ def load_scenario(
     InputError
         ``target.path`` does not exist.
     """
-    label = "scenario"
+    source_label = "scenario"
     if isinstance(source, Scenario):
         data = source.model_dump(mode="json")
     elif isinstance(source, dict):
         data = source
     else:
-        label = str(source)
+        source_label = str(source)
         data = load_yaml(source)
     if overrides:
         data = apply_overrides(data, overrides)
+    label = label or source_label
     sc: Scenario = validate(Scenario, data, label)
     if check:
         _check_scenario(sc, label)
@@ -422,6 +427,31 @@ def resolve_scenario(sc: Scenario) -> dict[str, Any]:
     d["trajectory"]["params"] = _plain(params)
     d["relnav_version"] = __version__
     return d
+
+
+class _FlowListDumper(yaml.SafeDumper):
+    """YAML dumper writing short lists of scalars in flow style (``[0.0, 0.0, 1.0]``)."""
+
+
+def _repr_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    flow = all(not isinstance(v, dict | list) for v in data) and len(data) <= 16
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_FlowListDumper.add_representer(list, _repr_list)
+
+
+def scenario_yaml(sc: Scenario | dict[str, Any], *, resolved: bool = True) -> str:
+    """YAML text of a scenario that :func:`load_scenario` reads back.
+
+    ``resolved`` fills in every trajectory default and the relnav version
+    (:func:`resolve_scenario`).
+    """
+    if isinstance(sc, Scenario):
+        d = resolve_scenario(sc) if resolved else sc.model_dump(mode="json")
+    else:
+        d = _plain(sc)
+    return yaml.dump(d, Dumper=_FlowListDumper, sort_keys=False, allow_unicode=True, width=100)
 
 
 def _plain(x: Any) -> Any:
@@ -604,8 +634,9 @@ def simulate(
             if progress is not None:
                 progress(k + 1, sc.frames)
         tw = time.perf_counter()
-        for i, w in enumerate(writers):
-            w.close(scenario=resolved if i == 0 else None)
+        for w in writers:
+            w.close()
+        (out / "scenario.yaml").write_text(scenario_yaml(resolved), encoding="utf-8")
         timings["write"] += time.perf_counter() - tw
     finally:
         for w in writers:
