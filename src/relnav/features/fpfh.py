@@ -15,7 +15,9 @@ FPFH(p), ``variant="pcl"`` (default, what Paper 1 ran; also Open3D's implementat
 ``Σ_{q: d>0} SPFH(q) / d²`` with ``d²`` the **squared** distance, the SPFH of ``p`` itself
 skipped, then each 11-bin block rescaled to sum 100. ``variant="paper"`` (Rusu et al. 2009):
 ``SPFH(p) + (1/k') Σ_{q: d>0} SPFH(q) / d`` with ``d`` the distance and ``k'`` the number of those
-neighbours (no rescaling).
+neighbours (no rescaling). ``variant="open3d"``: Open3D's ``compute_fpfh_feature`` (checked
+against 0.20): the PCL variant **plus** the keypoint's own SPFH after the rescaling (blocks sum
+to 200) — Open3D's source re-enabled the paper's own-SPFH term on top of PCL's weighting.
 
 Invalid rows (NaN): fewer than ``MIN_SUPPORT`` (5) support points incl. the keypoint, or an all-
 zero histogram (no neighbour with a usable SPFH).
@@ -112,9 +114,10 @@ def _fpfh_kernel(
     kp: np.ndarray,
     need: np.ndarray,
     radius: float,
-    paper: bool,
+    variant: int,
     min_support: int,
 ) -> np.ndarray:
+    """SPFH of the needed points, then FPFH per keypoint (variant 0 pcl, 1 paper, 2 open3d)."""
     n = P.shape[0]
     K = kp.shape[0]
     out = np.full((K, FPFH_DIM), np.nan, dtype=np.float32)
@@ -159,6 +162,7 @@ def _fpfh_kernel(
             for b in range(FPFH_DIM):
                 spfh[ri, b] = cnt[b] * incr
     # combine per keypoint
+    paper = variant == 1
     acc = np.zeros(FPFH_DIM)
     for k in range(K):
         i = kp[k]
@@ -203,6 +207,9 @@ def _fpfh_kernel(
                     acc[b] *= sc
             if not ok:
                 continue
+            if variant == 2:  # Open3D adds the keypoint's own SPFH after the rescaling
+                for b in range(FPFH_DIM):
+                    acc[b] += spfh[row[i], b]
             for b in range(FPFH_DIM):
                 out[k, b] = acc[b]
     return out
@@ -252,8 +259,8 @@ def fpfh(
         Support radius ``r`` (SPFH and FPFH), metres (default ``20·Tr`` via the registry).
     normals : (N, 3) float64
         Unit normals of ``points``.
-    variant : {"pcl", "paper"}
-        Weighting (see module docstring); ``"pcl"`` matches PCL and Open3D.
+    variant : {"pcl", "paper", "open3d"}
+        Weighting (see module docstring); ``"pcl"`` matches PCL, ``"open3d"`` Open3D ≥ 0.1x.
 
     Returns
     -------
@@ -262,8 +269,8 @@ def fpfh(
     """
     if unknown:
         raise ConfigError(f"unknown FPFH option(s) {sorted(unknown)}; valid: variant")
-    if variant not in ("pcl", "paper"):
-        raise ConfigError(f"FPFH variant must be 'pcl' or 'paper', got {variant!r}")
+    if variant not in ("pcl", "paper", "open3d"):
+        raise ConfigError(f"FPFH variant must be 'pcl', 'paper' or 'open3d', got {variant!r}")
     P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     kp = np.ascontiguousarray(keypoint_idx, dtype=np.int64).reshape(-1)
     if not (np.isfinite(radius) and radius > 0):
@@ -279,7 +286,8 @@ def fpfh(
         need = np.ones(P.shape[0], dtype=bool)
     else:
         need = _needed(P, kp, float(radius))
-    out = _fpfh_kernel(P, Nrm, kp, need, float(radius), variant == "paper", MIN_SUPPORT)
+    code = {"pcl": 0, "paper": 1, "open3d": 2}[variant]
+    out = _fpfh_kernel(P, Nrm, kp, need, float(radius), code, MIN_SUPPORT)
     n_bad = int(np.isnan(out[:, 0]).sum())
     if n_bad:
         log.debug("FPFH: %d of %d keypoints invalid (NaN)", n_bad, kp.size)
