@@ -152,6 +152,35 @@ def test_ground_truth_composition_matches_world_poses(tmp_path):
     assert not np.allclose(T_W_target[0], T_W_target[-1])
 
 
+def test_target_rotates_about_its_centre_of_mass():
+    c = np.array([0.4, -0.3, 0.2])
+    sc = load_scenario(_small(target={"name": "iridium", "com_offset": c.tolist()}))
+    _, _, T_W_target = scenario_poses(sc)
+    # the centre of mass sits at the W origin in every frame
+    np.testing.assert_allclose(T_W_target[:, :3, :3] @ c + T_W_target[:, :3, 3], 0, atol=1e-12)
+
+
+def test_two_sensor_ground_truth_exact(tmp_path):
+    sc = get_preset("li-rotating", frames=2, distance=2.0, axis="x")
+    d = apply_overrides(
+        sc.model_dump(mode="json"),
+        {
+            "sensors.0.overrides": {"sigma_coeff": 0.0, "quantize": False},
+            "sensors.1.overrides": {"range_sigma": 0.0},
+        },
+    )
+    simulate(d, tmp_path / "li")
+    mesh = get_target("iridium", scale_to=sc.target.scale_to).mesh
+    rng = np.random.default_rng(1)
+    for sensor in (None, "lidar"):
+        seq = ScanSequence(tmp_path / "li", sensor=sensor)
+        for k in range(len(seq)):
+            p = seq[k].points
+            p = p[rng.choice(len(p), 150, replace=False)]
+            g = seq.gt_poses[k]
+            assert _closest_dist(mesh, p @ g[:3, :3].T + g[:3, 3]).max() < 1e-6
+
+
 def test_noisy_points_near_the_mesh(tmp_path):
     simulate(_small(frames=2), tmp_path / "seq")
     seq = ScanSequence(tmp_path / "seq")

@@ -712,14 +712,11 @@ class CrossSourceRegistration:
         if self.coplanar == "tolerance":
             e = quad[1:] - quad[0]
             n = np.cross(e[0], e[1])
-            nn = np.linalg.norm(n)
-            coplanar = nn > 0 and abs(float(n @ e[2])) / nn < tau
-            eta = math.inf if coplanar else 0.0
+            nn = float(np.linalg.norm(n))
+            flat = nn == 0.0 or abs(float(n @ e[2])) / nn < tau
+            fit = cga.spheres_through_points(quad[None], eta=math.inf if flat else 0.0)
         else:
-            eta = self.eta
-        fit = cga.spheres_through_points(quad[None], eta=eta) if eta > 0 else None
-        if fit is None:
-            fit = cga.spheres_through_points(quad[None], eta=1e-300)
+            fit = cga.spheres_through_points(quad[None], eta=self.eta)
         if not fit.valid[0]:
             return None
         c = fit.centres[0]
