@@ -67,7 +67,7 @@ def test_negative_range_and_bad_numbers():
 def test_unknown_trajectory_kind_and_param():
     with pytest.raises(ConfigError, match="unknown trajectory kind 'zigzag'"):
         load_scenario(_small(trajectory={"kind": "zigzag"}))
-    with pytest.raises(ConfigError, match="unknown parameter.*radius"):
+    with pytest.raises(ConfigError, match=r"unknown parameter.*radius"):
         load_scenario(_small(trajectory={"kind": "helical-approach", "params": {"radius": 3}}))
     with pytest.raises(ConfigError, match="triangle"):
         load_scenario(_small(attitude={"kind": "tumble", "inertia": [1, 1, 9]}))
@@ -141,7 +141,9 @@ def test_ground_truth_is_exact(tmp_path, sensor, overrides):
 
 
 def test_ground_truth_composition_matches_world_poses(tmp_path):
-    d = _small(frames=3, sensors=[{"preset": "goldeneye", "rpy_deg": [0, 5, 0], "offset_m": [0, 0.3, 0]}])
+    d = _small(
+        frames=3, sensors=[{"preset": "goldeneye", "rpy_deg": [0, 5, 0], "offset_m": [0, 0.3, 0]}]
+    )
     sc = load_scenario(d)
     simulate(sc, tmp_path / "seq")
     gt = ScanSequence(tmp_path / "seq").gt_poses
@@ -290,7 +292,17 @@ def test_li_rotating_two_sensor_folders(tmp_path):
     assert ang == pytest.approx(22.5, abs=1e-6)
 
 
-@pytest.mark.parametrize(("name", "frames"), [("sim-orion", 25), ("sim-bennu", 25)])
+@pytest.mark.parametrize(
+    ("name", "frames"),
+    [
+        ("real-fb", 31),
+        ("real-curved", 41),
+        ("sim-helical", 30),
+        ("sim-voyager", 50),
+        ("sim-orion", 25),
+        ("sim-bennu", 25),
+    ],
+)
 def test_preset_point_counts_in_band(tmp_path, name, frames):
     summary = simulate(get_preset(name, frames=frames), tmp_path / name)
     mean = summary.sensors[0].mean_points

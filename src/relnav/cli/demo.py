@@ -55,7 +55,7 @@ def demo(
     scenario = get_preset(preset, frames=frames, seed=seed)
     with progress_bar() as bar:
         task = bar.add_task(f"simulate {preset}", total=scenario.frames)
-        simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task))
+        simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
         seq = ScanSequence(seq_dir)
         runs = {}
         for m in method:

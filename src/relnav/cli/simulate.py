@@ -41,9 +41,9 @@ def build_scenario(
     params = dict(params or {})
     dotted = {k: v for k, v in params.items() if "." in k}
     plain = {k: v for k, v in params.items() if "." not in k}
-    is_preset = source.lower().replace("_", "-") in available_presets() and not Path(
-        source
-    ).is_file()
+    is_preset = (
+        source.lower().replace("_", "-") in available_presets() and not Path(source).is_file()
+    )
     if is_preset:
         allowed = preset_options(source)
         bad = sorted(set(plain) - set(allowed))
@@ -97,11 +97,13 @@ def build_scenario(
             data["target"] = tgt
     if dotted:
         data = apply_overrides(data, dotted)
-    return load_scenario(data, label=None if is_preset else source)
+    return load_scenario(data, label=f"preset {source!r}" if is_preset else source)
 
 
 def simulate(
-    source: str = typer.Argument(..., help="Preset name (relnav config list) or scenario YAML file."),
+    source: str = typer.Argument(
+        ..., help="Preset name (relnav config list) or scenario YAML file."
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output sequence folder."),
     frames: int | None = typer.Option(None, "--frames", "-n", min=1, help="Number of frames."),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Scenario seed."),

@@ -15,8 +15,8 @@ reconstruction of ALGORITHMS §A.1, consistent with every statement of Paper 1:
 
 Modes
 -----
-``mode="exact"`` (default) returns exactly the all-pairs histograms. Keypoints are visited in
-Morton (Z-order) of their positions, so consecutive supports overlap heavily; the integer
+``mode="exact"`` (default) returns exactly the all-pairs histograms. Keypoints are visited along
+a greedy nearest-neighbour tour of their positions, so consecutive supports overlap heavily; the integer
 pair-count histogram of the current support is updated incrementally: each point leaving the
 support subtracts its pairs with the remaining members, each point entering adds its pairs with
 the members (cost ``∝ |S Δ S'|·|S|`` instead of ``|S|²``; a support is rebuilt from scratch when
@@ -51,12 +51,13 @@ import logging
 
 import numpy as np
 from numba import njit
+from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
 from relnav.geometry.lrf import _grid_build, _grid_query
 
-__all__ = ["HOD_COARSE_BINS", "HOD_FINE_BINS", "hod", "hods", "morton_order"]
+__all__ = ["HOD_COARSE_BINS", "HOD_FINE_BINS", "hod", "hod_histograms", "hods", "visit_order"]
 
 log = logging.getLogger(__name__)
 
@@ -64,20 +65,6 @@ HOD_COARSE_BINS = 40
 HOD_FINE_BINS = 200
 
 _OPTIONS = ("mode", "normalization", "n_max", "n_pairs", "fast_method", "seed")
-
-
-def morton_order(points: np.ndarray, cell: float) -> np.ndarray:
-    """Indices that sort ``points`` (K, 3) along the Morton (Z-order) curve of a grid of ``cell``."""
-    X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if X.shape[0] == 0:
-        return np.zeros(0, dtype=np.int64)
-    q = np.floor((X - X.min(axis=0)) / cell)
-    q = np.clip(q, 0, 2**21 - 1).astype(np.uint64)
-    code = np.zeros(X.shape[0], dtype=np.uint64)
-    for b in range(21):
-        for d in range(3):
-            code |= ((q[:, d] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + (2 - d))
-    return np.argsort(code, kind="stable").astype(np.int64)
 
 
 @njit(cache=True)
@@ -96,24 +83,47 @@ def _pair_bins(
 
 @njit(cache=True)
 def _add_pairs(
-    C: np.ndarray, a: int, members: np.ndarray, m: int, hc: np.ndarray, hf: np.ndarray,
-    sign: int, norm: float, nc: int, nf: int,
+    ax: float,
+    ay: float,
+    az: float,
+    mx: np.ndarray,
+    my: np.ndarray,
+    mz: np.ndarray,
+    m0: int,
+    m1: int,
+    hc: np.ndarray,
+    hf: np.ndarray,
+    sign: int,
+    norm: float,
+    nc: int,
+    nf: int,
+    cb: np.ndarray,
+    fb: np.ndarray,
 ) -> None:
-    """Add ``sign`` × the bins of the pairs (a, members[:m]) to the count histograms."""
-    ax = C[a, 0]
-    ay = C[a, 1]
-    az = C[a, 2]
+    """Add ``sign`` × the bins of the pairs ``(a, member i)``, ``m0 ≤ i < m1``, to the counts.
+
+    Members are stored as coordinate columns ``mx, my, mz`` (contiguous → the distance loop
+    vectorises); the bins go through the scratch arrays ``cb`` / ``fb``.
+    """
     if nf > 0:
-        for i in range(m):
-            b = members[i]
-            c, f = _pair_bins(ax, ay, az, C[b, 0], C[b, 1], C[b, 2], norm, nc, nf)
-            hc[c] += sign
-            hf[f] += sign
+        for i in range(m0, m1):
+            dx = ax - mx[i]
+            dy = ay - my[i]
+            dz = az - mz[i]
+            x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
+            cb[i] = min(int(x * nc), nc - 1)
+            fb[i] = min(int(x * nf), nf - 1)
+        for i in range(m0, m1):
+            hf[fb[i]] += sign
     else:
-        for i in range(m):
-            b = members[i]
-            c, _ = _pair_bins(ax, ay, az, C[b, 0], C[b, 1], C[b, 2], norm, nc, 1)
-            hc[c] += sign
+        for i in range(m0, m1):
+            dx = ax - mx[i]
+            dy = ay - my[i]
+            dz = az - mz[i]
+            x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
+            cb[i] = min(int(x * nc), nc - 1)
+    for i in range(m0, m1):
+        hc[cb[i]] += sign
 
 
 @njit(cache=True)
@@ -124,6 +134,57 @@ def _write_pmf(out: np.ndarray, k: int, hc: np.ndarray, hf: np.ndarray, nf: int,
         out[k, b] = hc[b] / npairs
     for b in range(nf):
         out[k, nc + b] = hf[b] / npairs
+
+
+@njit(cache=True)
+def _greedy_tour(C: np.ndarray, nn: np.ndarray) -> np.ndarray:
+    """Greedy nearest-neighbour tour through the centres ``C`` (K, 3).
+
+    ``nn`` (K, k) are each centre's k nearest centres (self first); when all of them are
+    visited the nearest unvisited centre is found by a linear scan.
+    """
+    K = C.shape[0]
+    order = np.empty(K, dtype=np.int64)
+    if K == 0:
+        return order
+    visited = np.zeros(K, dtype=np.bool_)
+    cur = 0
+    for i in range(1, K):
+        if C[i, 0] < C[cur, 0]:
+            cur = i
+    for t in range(K):
+        order[t] = cur
+        visited[cur] = True
+        if t == K - 1:
+            break
+        nxt = -1
+        for j in range(nn.shape[1]):
+            c = nn[cur, j]
+            if c < K and not visited[c]:
+                nxt = c
+                break
+        if nxt < 0:
+            best = np.inf
+            for c in range(K):
+                if not visited[c]:
+                    dx = C[c, 0] - C[cur, 0]
+                    dy = C[c, 1] - C[cur, 1]
+                    dz = C[c, 2] - C[cur, 2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 < best:
+                        best = d2
+                        nxt = c
+        cur = nxt
+    return order
+
+
+def visit_order(centres: np.ndarray, k: int = 16) -> np.ndarray:
+    """Spatially coherent visiting order of keypoint positions (greedy nearest-neighbour tour)."""
+    C = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 3)
+    if C.shape[0] <= 1:
+        return np.arange(C.shape[0], dtype=np.int64)
+    _, nn = cKDTree(C).query(C, k=min(k, C.shape[0]))
+    return _greedy_tour(C, np.ascontiguousarray(nn, dtype=np.int64))
 
 
 @njit(cache=True)
@@ -142,19 +203,25 @@ def _hod_incremental(
 
     ``centre_in_cloud[k]`` says that centre ``k`` is itself a point of ``cloud`` (then it is in
     its own support automatically); otherwise its pairs with the support are added on the fly.
-    Returns ``(pmf (K, nc+nf) float32 with NaN rows, support sizes (K,), pair-ops)``.
+    Returns ``(pmf (K, nc+nf) float32 with NaN rows, support sizes (K,), pair updates)``.
     """
     M = cloud.shape[0]
     K = centres.shape[0]
     out = np.full((K, nc + nf), np.nan, dtype=np.float32)
     sizes = np.zeros(K, dtype=np.int64)
     lo, h, dims, start, sidx, spts = _grid_build(cloud, radius)
-    buf = np.empty(max(M, 1), dtype=np.int64)
-    bd = np.empty(max(M, 1))
-    members = np.empty(max(M, 1), dtype=np.int64)
-    pos = np.full(max(M, 1), -1, dtype=np.int64)
-    stamp = np.zeros(max(M, 1), dtype=np.int64)
-    leave = np.empty(max(M, 1), dtype=np.int64)
+    M1 = max(M, 1)
+    buf = np.empty(M1, dtype=np.int64)
+    bd = np.empty(M1)
+    members = np.empty(M1, dtype=np.int64)
+    mx = np.empty(M1)
+    my = np.empty(M1)
+    mz = np.empty(M1)
+    cb = np.empty(M1, dtype=np.int64)
+    fb = np.empty(M1, dtype=np.int64)
+    pos = np.full(M1, -1, dtype=np.int64)
+    stamp = np.zeros(M1, dtype=np.int64)
+    leave = np.empty(M1, dtype=np.int64)
     hc = np.zeros(nc, dtype=np.int64)
     hf = np.zeros(max(nf, 1), dtype=np.int64)
     tc = np.zeros(nc, dtype=np.int64)
@@ -184,26 +251,42 @@ def _hod_incremental(
             hf[:] = 0
             for i in range(nT):
                 b = buf[i]
-                _add_pairs(cloud, b, members, m, hc, hf, 1, norm, nc, nf)
-                members[m] = b
-                pos[b] = m
-                m += 1
+                members[i] = b
+                pos[b] = i
+                mx[i] = cloud[b, 0]
+                my[i] = cloud[b, 1]
+                mz[i] = cloud[b, 2]
+            m = nT
+            for i in range(1, m):
+                _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hc, hf, 1, norm, nc, nf, cb, fb)
             ops += reb_cost
         else:
             for i in range(nL):
                 a = leave[i]
                 pa = pos[a]
-                last = members[m - 1]
-                members[pa] = last
-                pos[last] = pa
+                ax = mx[pa]
+                ay = my[pa]
+                az = mz[pa]
+                last = m - 1
+                members[pa] = members[last]
+                mx[pa] = mx[last]
+                my[pa] = my[last]
+                mz[pa] = mz[last]
+                pos[members[pa]] = pa
                 pos[a] = -1
                 m -= 1
-                _add_pairs(cloud, a, members, m, hc, hf, -1, norm, nc, nf)
+                _add_pairs(ax, ay, az, mx, my, mz, 0, m, hc, hf, -1, norm, nc, nf, cb, fb)
             for i in range(nT):
                 b = buf[i]
                 if pos[b] < 0:
-                    _add_pairs(cloud, b, members, m, hc, hf, 1, norm, nc, nf)
+                    bx = cloud[b, 0]
+                    by = cloud[b, 1]
+                    bz = cloud[b, 2]
+                    _add_pairs(bx, by, bz, mx, my, mz, 0, m, hc, hf, 1, norm, nc, nf, cb, fb)
                     members[m] = b
+                    mx[m] = bx
+                    my[m] = by
+                    mz[m] = bz
                     pos[b] = m
                     m += 1
             ops += inc_cost
@@ -216,16 +299,7 @@ def _hod_incremental(
             if n >= min_support:
                 tc[:] = hc
                 tf[:] = hf
-                qx = q[0]
-                qy = q[1]
-                qz = q[2]
-                for i in range(m):
-                    b = members[i]
-                    c, f = _pair_bins(
-                        qx, qy, qz, cloud[b, 0], cloud[b, 1], cloud[b, 2], norm, nc, max(nf, 1)
-                    )
-                    tc[c] += 1
-                    tf[f] += 1
+                _add_pairs(q[0], q[1], q[2], mx, my, mz, 0, m, tc, tf, 1, norm, nc, nf, cb, fb)
                 _write_pmf(out, k, tc, tf, nf, n)
         sizes[k] = n
     return out, sizes, ops
@@ -251,9 +325,14 @@ def _hod_brute(
     """
     M = cloud.shape[0]
     lo, h, dims, start, sidx, spts = _grid_build(cloud, radius)
-    buf = np.empty(max(M, 1) + 1, dtype=np.int64)
-    bd = np.empty(max(M, 1) + 1)
-    S = np.empty((max(M, 1) + 1, 3))
+    M1 = max(M, 1) + 1
+    buf = np.empty(M1, dtype=np.int64)
+    bd = np.empty(M1)
+    mx = np.empty(M1)
+    my = np.empty(M1)
+    mz = np.empty(M1)
+    cb = np.empty(M1, dtype=np.int64)
+    fb = np.empty(M1, dtype=np.int64)
     hc = np.zeros(nc, dtype=np.int64)
     hf = np.zeros(max(nf, 1), dtype=np.int64)
     sizes = np.zeros(which.shape[0], dtype=np.int64)
@@ -262,9 +341,13 @@ def _hod_brute(
         q = centres[k]
         n = _grid_query(spts, lo, h, dims, start, sidx, q, radius, buf, bd)
         for i in range(n):
-            S[i] = cloud[buf[i]]
+            mx[i] = cloud[buf[i], 0]
+            my[i] = cloud[buf[i], 1]
+            mz[i] = cloud[buf[i], 2]
         if not centre_in_cloud[k]:
-            S[n] = q
+            mx[n] = q[0]
+            my[n] = q[1]
+            mz[n] = q[2]
             n += 1
         sizes[w] = n
         for b in range(nc + nf):
@@ -276,9 +359,9 @@ def _hod_brute(
             dmax = 0.0
             for i in range(n):
                 for j in range(i + 1, n):
-                    dx = S[i, 0] - S[j, 0]
-                    dy = S[i, 1] - S[j, 1]
-                    dz = S[i, 2] - S[j, 2]
+                    dx = mx[i] - mx[j]
+                    dy = my[i] - my[j]
+                    dz = mz[i] - mz[j]
                     d = np.sqrt(dx * dx + dy * dy + dz * dz)
                     if d > dmax:
                         dmax = d
@@ -287,13 +370,8 @@ def _hod_brute(
             norm = dmax
         hc[:] = 0
         hf[:] = 0
-        for i in range(n):
-            for j in range(i + 1, n):
-                c, f = _pair_bins(
-                    S[i, 0], S[i, 1], S[i, 2], S[j, 0], S[j, 1], S[j, 2], norm, nc, max(nf, 1)
-                )
-                hc[c] += 1
-                hf[f] += 1
+        for i in range(1, n):
+            _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hc, hf, 1, norm, nc, nf, cb, fb)
         _write_pmf(out, k, hc, hf, nf, n)
     return sizes
 
@@ -483,7 +561,7 @@ def hod_histograms(
         if small.size:
             _hod_brute(P, centres, np.ones(K, dtype=bool), small, r, True, nc, nf, MIN_SUPPORT, out)
         return out
-    order = morton_order(centres, r / 8.0)
+    order = visit_order(centres)
     out, sizes_k, ops = _hod_incremental(
         cloud, centres, in_cloud, order, r, norm, nc, nf, MIN_SUPPORT
     )

@@ -329,6 +329,8 @@ class CrossSourceRegistration:
         max_candidates: int = 400,
         max_rotation_deg: float | None = None,
         refine: int = 1,
+        quad_select: Literal["farthest", "consistent"] = "farthest",
+        keep_frac: float = 0.5,
         min_retained: int = 3,
         min_fitness: float = 0.2,
     ) -> None:
@@ -383,6 +385,12 @@ class CrossSourceRegistration:
         self.max_candidates = int(max_candidates)
         self.max_rotation_deg = None if max_rotation_deg is None else float(max_rotation_deg)
         self.refine = int(refine)
+        if quad_select not in ("farthest", "consistent"):
+            raise ConfigError(f"quad_select must be 'farthest' or 'consistent', got {quad_select!r}")
+        if not 0 < float(keep_frac) <= 1:
+            raise ConfigError(f"keep_frac must be in (0, 1], got {keep_frac}")
+        self.quad_select = quad_select
+        self.keep_frac = float(keep_frac)
         self.min_retained = int(min_retained)
         self.min_fitness = float(min_fitness)
 
@@ -658,7 +666,9 @@ class CrossSourceRegistration:
             cand = np.asarray(tree_q.query_ball_point(R_h @ p + t_h, gate), dtype=np.int64)
             if cand.size < 4:
                 continue
-            cand = cand[np.abs(qn[cand] - rho) < tau]  # shell: P_i·P_c
+            shell = np.abs(qn[cand] - rho)
+            keep = shell < tau  # shell: P_i·P_c
+            cand, resid = cand[keep], shell[keep] / tau
             if cand.size >= 4 and acc_p:
                 q = Q0[cand]
                 Pj = np.asarray(acc_p[-self.n_check :])
@@ -666,7 +676,9 @@ class CrossSourceRegistration:
                 # pair distances P_i·P_j
                 dp = np.linalg.norm(Pj - p, axis=1)
                 dq = np.linalg.norm(q[:, None, :] - Cj[None], axis=2)
-                ok = np.all(np.abs(dq - dp) < tau, axis=1)
+                dres = np.abs(dq - dp)
+                ok = np.all(dres < tau, axis=1)
+                resid = resid + dres.mean(axis=1) / tau
                 # centroid angles ∠P_i P_c
                 if rho > 0:
                     cp = (Pj @ p) / np.maximum(np.linalg.norm(Pj, axis=1) * rho, 1e-300)
@@ -680,9 +692,12 @@ class CrossSourceRegistration:
                         side = max(dp[j], dp[k], float(np.linalg.norm(Pj[j] - Pj[k])))
                         aq = _tri_area(q, Cj[j][None], Cj[k][None])
                         ok &= np.abs(aq - ap) <= self.area_tol * ap + 0.5 * tau * side
-                cand = cand[ok]
+                cand, resid = cand[ok], resid[ok]
             if cand.size < 4:
                 continue
+            if self.quad_select == "consistent" and cand.size > 8:
+                best = np.argsort(resid, kind="stable")[: max(8, int(self.keep_frac * cand.size))]
+                cand = cand[best]
             q = Q0[cand]
             quad = q[_fps_small(q, 4)]
             fit = self._sphere(quad, tau)

@@ -308,11 +308,20 @@ def spheres_through_points(quads: Any, *, eta: float = 1e-3) -> SphereFit:
         Qs = Q[sph]
         A = np.concatenate([2.0 * Qs, -np.ones((Qs.shape[0], 4, 1))], axis=2)
         rhs = np.sum(Qs * Qs, axis=2)
-        sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+        try:
+            sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # an exactly singular quadruple: solve row by row
+            sol = np.full((Qs.shape[0], 4), np.nan)
+            for i in range(Qs.shape[0]):
+                try:
+                    sol[i] = np.linalg.solve(A[i], rhs[i])
+                except np.linalg.LinAlgError:
+                    pass
         c = sol[:, :3]
         r2 = np.sum(c * c, axis=1) - sol[:, 3]
         centres[sph] = c
-        radii[sph] = np.sqrt(np.maximum(r2, 0.0))
+        with np.errstate(invalid="ignore"):
+            radii[sph] = np.where(r2 >= 0, np.sqrt(np.abs(r2)), np.nan)
     if coplanar.any():
         Qc = Q[coplanar]
         tri = Qc[:, _TRIPLES]  # (Kc, 4, 3, 3)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from relnav.errors import InputError
-from relnav.geometry.rotations import matrix_to_quat, quat_multiply, quat_to_matrix
+from relnav.geometry.rotations import matrix_to_quat, quat_to_matrix
 
 __all__ = [
     "cayley",
@@ -55,6 +55,19 @@ def _as_dq(a: np.ndarray, name: str = "dual quaternion") -> np.ndarray:
     return a
 
 
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of ``(..., 4)`` xyzw quaternions (same as ``rotations.quat_multiply``,
+    without its axis shuffling: this is the hot path of the UKF)."""
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    return out
+
+
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
     """Conjugate ``q*`` of quaternion(s) ``(..., 4)`` in ``(x, y, z, w)`` order."""
     return np.asarray(q, dtype=np.float64) * _CONJ
@@ -77,8 +90,8 @@ def dq_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Product ``a ⊗ b = a_r b_r + ε (a_r b_d + a_d b_r)`` of dual quaternions ``(..., 8)``."""
     a = _as_dq(a)
     b = _as_dq(b)
-    real = quat_multiply(a[..., :4], b[..., :4])
-    dual = quat_multiply(a[..., :4], b[..., 4:]) + quat_multiply(a[..., 4:], b[..., :4])
+    real = _qmul(a[..., :4], b[..., :4])
+    dual = _qmul(a[..., :4], b[..., 4:]) + _qmul(a[..., 4:], b[..., :4])
     return np.concatenate([real, dual], axis=-1)
 
 
@@ -92,7 +105,7 @@ def dq_inverse(a: np.ndarray) -> np.ndarray:
     """General inverse ``q⁻¹ − ε q⁻¹ q_d q⁻¹`` (requires a non-zero real part)."""
     a = _as_dq(a)
     ri = quat_inverse(a[..., :4])
-    di = -quat_multiply(quat_multiply(ri, a[..., 4:]), ri)
+    di = -_qmul(_qmul(ri, a[..., 4:]), ri)
     return np.concatenate([ri, di], axis=-1)
 
 
@@ -138,7 +151,7 @@ def dq_from_rt(quat_xyzw: np.ndarray, t: np.ndarray) -> np.ndarray:
         raise InputError(f"expected quaternion (..., 4) and translation (..., 3), got {q.shape}")
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     tq = np.concatenate([t, np.zeros(t.shape[:-1] + (1,))], axis=-1)
-    qd = 0.5 * quat_multiply(tq, q)
+    qd = 0.5 * _qmul(tq, q)
     q, qd = np.broadcast_arrays(q, qd)
     return np.concatenate([q, qd], axis=-1)
 
@@ -146,7 +159,7 @@ def dq_from_rt(quat_xyzw: np.ndarray, t: np.ndarray) -> np.ndarray:
 def dq_to_rt(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation quaternion ``(..., 4)`` (``w ≥ 0``) and translation ``2 q_d ⊗ q*`` ``(..., 3)``."""
     a = _as_dq(a)
-    t = 2.0 * quat_multiply(a[..., 4:], quat_conjugate(a[..., :4]))[..., :3]
+    t = 2.0 * _qmul(a[..., 4:], quat_conjugate(a[..., :4]))[..., :3]
     q = a[..., :4]
     q = np.where(q[..., 3:4] < 0.0, -q, q)
     return q, t
@@ -184,7 +197,9 @@ def _pure(v6: np.ndarray) -> np.ndarray:
     return np.concatenate([v6[..., :3], z, v6[..., 3:], z], axis=-1)
 
 
-def cayley(a: np.ndarray, *, hemisphere: bool = True, full: bool = False) -> np.ndarray:
+def cayley(
+    a: np.ndarray, *, hemisphere: bool = True, full: bool = False, general: bool = False
+) -> np.ndarray:
     """Cayley transform ``B = (q̂ − 1)(q̂ + 1)⁻¹`` of unit dual quaternion(s).
 
     Parameters
@@ -196,7 +211,12 @@ def cayley(a: np.ndarray, *, hemisphere: bool = True, full: bool = False) -> np.
         ``|B_r| ≤ 1`` (rotation angle ≤ π). With ``False`` the literal transform of ``a`` is
         returned (infinite at ``q = −1``).
     full : bool
-        Return all 8 components (scalar parts included, ≈ 0 for unit input) instead of 6.
+        Return all 8 components (scalar parts included, ≈ 0 for unit input) instead of 6;
+        implies ``general``.
+    general : bool
+        Evaluate the literal dual-quaternion expression (valid for any invertible ``q̂ + 1``)
+        instead of the closed form for unit input ``B_r = v/(1 + w)``,
+        ``B_d = (1 − B_r) q_d (q + 1)⁻¹``. Both agree to rounding on unit input.
 
     Returns
     -------
@@ -206,23 +226,42 @@ def cayley(a: np.ndarray, *, hemisphere: bool = True, full: bool = False) -> np.
     a = _as_dq(a)
     if hemisphere:
         a = dq_canonical(a)
-    one = dq_identity()
+    if full or general:
+        one = dq_identity()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            B = dq_multiply(a - one, dq_inverse(a + one))
+        return B if full else B[..., [0, 1, 2, 4, 5, 6]]
+    q = a[..., :4]
     with np.errstate(divide="ignore", invalid="ignore"):
-        B = dq_multiply(a - one, dq_inverse(a + one))
-    if full:
-        return B
-    return B[..., [0, 1, 2, 4, 5, 6]]
+        qp1 = q.copy()
+        qp1[..., 3] += 1.0
+        inv_qp1 = quat_inverse(qp1)
+        br = q[..., :3] / qp1[..., 3:4]
+        one_m_br = np.concatenate([-br, np.ones(br.shape[:-1] + (1,))], axis=-1)
+        bd = _qmul(_qmul(one_m_br, a[..., 4:]), inv_qp1)[..., :3]
+    return np.concatenate([br, bd], axis=-1)
 
 
-def cayley_inverse(B: np.ndarray) -> np.ndarray:
+def cayley_inverse(B: np.ndarray, *, general: bool = False) -> np.ndarray:
     """Inverse Cayley transform ``q̂ = (1 + B)(1 − B)⁻¹`` of twist(s) ``(..., 6)``.
 
-    Always a unit dual quaternion with ``q_w ≥ 0`` when ``|B_r| ≤ 1``. ``cayley_inverse(0)`` is
-    the identity.
+    Always a unit dual quaternion, with ``q_w ≥ 0`` when ``|B_r| ≤ 1``;
+    ``cayley_inverse(0)`` is the identity. Closed form: ``q = [2 B_r, 1 − |B_r|²]/(1 + |B_r|²)``,
+    ``q_d = (1 + q) B_d (1 − B_r)⁻¹``; ``general=True`` evaluates the literal expression.
     """
     Bq = _pure(B)
-    one = dq_identity()
-    return dq_multiply(one + Bq, dq_inverse(one - Bq))
+    if general:
+        one = dq_identity()
+        return dq_multiply(one + Bq, dq_inverse(one - Bq))
+    br = Bq[..., :4]
+    n2 = np.sum(br * br, axis=-1, keepdims=True)
+    den = 1.0 + n2
+    q = np.concatenate([2.0 * br[..., :3], 1.0 - n2], axis=-1) / den
+    inv_1mb = np.concatenate([br[..., :3], np.ones(br.shape[:-1] + (1,))], axis=-1) / den
+    qp1 = q.copy()
+    qp1[..., 3] += 1.0
+    qd = _qmul(_qmul(qp1, Bq[..., 4:]), inv_1mb)
+    return np.concatenate([q, qd], axis=-1)
 
 
 def cayley_mean(

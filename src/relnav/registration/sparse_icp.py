@@ -76,9 +76,21 @@ def _shrink_scale(hn: float, mu: float, p: float, ba: float, ha: float, n_iter: 
     if hn <= ha:
         return 0.0
     beta = (ba / hn + 1.0) / 2.0
-    for _ in range(n_iter):
-        beta = 1.0 - (p / mu) * hn ** (p - 2.0) * beta ** (p - 1.0)
-    return beta
+    k = (p / mu) * hn ** (p - 2.0)
+    if p == 0.5:  # fast path of the default: β^(p−1) = 1/√β
+        for _ in range(n_iter):
+            if beta <= 0.0:
+                return 0.0
+            beta = 1.0 - k / math.sqrt(beta)
+    elif p == 1.0:
+        for _ in range(n_iter):
+            beta = 1.0 - k
+    else:
+        for _ in range(n_iter):
+            if beta <= 0.0:
+                return 0.0
+            beta = 1.0 - k * beta ** (p - 1.0)
+    return max(beta, 0.0)
 
 
 @njit(cache=True)

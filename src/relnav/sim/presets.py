@@ -57,8 +57,8 @@ from typing import Any
 
 import numpy as np
 
-from relnav.errors import ConfigError
 from relnav.config import validate
+from relnav.errors import ConfigError
 from relnav.sim.scenario import Scenario
 
 __all__ = [

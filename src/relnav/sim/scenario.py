@@ -201,9 +201,7 @@ class AttitudeSpec(StrictModel):
         if self.kind == "static":
             return make_attitude("static", times, R0=R0)
         if self.kind == "spin":
-            return make_attitude(
-                "spin", times, axis=self.axis, rate_deg_s=self.rate_deg_s, R0=R0
-            )
+            return make_attitude("spin", times, axis=self.axis, rate_deg_s=self.rate_deg_s, R0=R0)
         return make_attitude(
             "tumble",
             times,
@@ -316,7 +314,7 @@ def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str
             if isinstance(node, list):
                 try:
                     idx = int(part)
-                    node[idx]  # noqa: B018 - bounds check
+                    _ = node[idx]  # bounds check
                 except (ValueError, IndexError):
                     raise ConfigError(f"override {key!r}: {part!r} is not a valid index") from None
                 if last:
@@ -405,11 +403,11 @@ def _check_scenario(sc: Scenario, label: str) -> None:
             sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params
         )
     except ConfigError as e:
-        raise ConfigError(f"{label}: trajectory: {e}") from None
+        raise ConfigError(f"{label}: {e}") from None
     try:
         sc.attitude.rotations(times[:2])
     except ConfigError as e:
-        raise ConfigError(f"{label}: attitude: {e}") from None
+        raise ConfigError(f"{label}: {e}") from None
     tgt = np.asarray(sc.pointing.target)
     if np.any(np.linalg.norm(pos - tgt, axis=1) < 1e-9):
         raise ConfigError(f"{label}: the trajectory passes through the pointing target")

@@ -48,7 +48,9 @@ __all__ = [
     "path_length",
     "pointing_poses",
     "rbar_approach",
+    "stationary",
     "trajectory_kinds",
+    "trajectory_params",
     "vbar_approach",
 ]
 
@@ -349,6 +351,11 @@ def rbar_approach(
     return _approach(n_frames, start, stop, profile, axis=0)
 
 
+def stationary(n_frames: int, *, position: ArrayLike3 = (-5.0, 0.0, 0.0)) -> np.ndarray:
+    """A sensor holding ``position`` (m, ``W``) in every frame (e.g. Paper 2's lab rig)."""
+    return np.tile(_vec3(position, "position"), (_check_frames(n_frames), 1))
+
+
 # --------------------------------------------------------------------------------------------
 # Clohessy–Wiltshire
 # --------------------------------------------------------------------------------------------
@@ -446,9 +453,7 @@ TRAJECTORIES: dict[str, Callable[..., np.ndarray]] = {
     "cw": clohessy_wiltshire,
     "vbar": vbar_approach,
     "rbar": rbar_approach,
-    "static": lambda n_frames, *, position=(-5.0, 0.0, 0.0): np.tile(
-        _vec3(position, "position"), (_check_frames(n_frames), 1)
-    ),
+    "static": stationary,
 }
 """Trajectory kinds by name. All take the frame count, except ``cw`` which takes frame times."""
 
@@ -508,7 +513,7 @@ def make_trajectory(
 
 def look_at(
     positions: np.ndarray,
-    target: ArrayLike3 = (0.0, 0.0, 0.0),
+    target: ArrayLike3 | float = (0.0, 0.0, 0.0),
     up: ArrayLike3 = (0.0, 0.0, 1.0),
 ) -> np.ndarray:
     """Sensor attitudes ``R_W_sensor`` ``(N, 3, 3)`` looking from ``positions`` at ``target``.
@@ -524,7 +529,7 @@ def look_at(
         If a position coincides with the target (boresight undefined).
     """
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    tgt = _vec3(target, "target")
+    tgt = np.full(3, float(target)) if np.ndim(target) == 0 else _vec3(target, "target")
     u = _unit(_vec3(up, "up"), "up")
     d = tgt[None, :] - p
     dist = np.linalg.norm(d, axis=1)
@@ -549,7 +554,7 @@ def look_at(
 def pointing_poses(
     positions: np.ndarray,
     *,
-    target: ArrayLike3 = (0.0, 0.0, 0.0),
+    target: ArrayLike3 | float = (0.0, 0.0, 0.0),
     up: ArrayLike3 = (0.0, 0.0, 1.0),
     jitter_deg: float = 0.0,
     seed: int | np.random.Generator | None = None,

@@ -1,0 +1,814 @@
+"""Twist (Cayley) dual-quaternion unscented Kalman filter (Paper 2 §2.4, Algorithm 1).
+
+What is estimated (ALGORITHMS.md §G.6)
+-------------------------------------
+The motion of the target relative to the sensor, all in the **sensor frame** ``s`` (x forward,
+y left, z up) unless stated:
+
+* ``d`` (m): the target's reference point (centroid) in ``s``; ``ḋ`` (m/s) its velocity;
+* ``q`` (xyzw): attitude of the target body frame ``b`` in ``s`` (``R_s_b``), kept together with
+  ``d`` as the unit pose dual quaternion ``q̂ = q + ε ½ d ⊗ q`` (``T_s_b``);
+* ``ω`` (rad/s): body angular rate in ``b`` (``q̇ = ½ q ⊗ [ω, 0]``), constant between frames.
+
+Translation follows Clohessy–Wiltshire (:mod:`relnav.fusion.dynamics`; ``n = 0`` is a
+force-free double integrator), attitude the body rates (eq. 31, right multiplication).
+
+Error state (``L = 15``): ``[δd (3), δḋ (3), B (6), δω (3)]`` with ``B = cayley(q̂⁻¹ ⊗ q̂_true)``
+(:mod:`relnav.geometry.dualquat`). ``B_r = tan(φ/4) u`` ≈ ``δθ/4``.
+
+Interpretations (Paper 2 is garbled or silent; each is named here)
+-----------------------------------------------------------------
+* **[interpretation] pose rebuild**: after propagation the dual part of every sigma point's pose
+  is rebuilt from its own ``(q, d)`` (eqs. 35–37 are garbled), so ``d`` is the master copy of the
+  translation. The dual half ``B_d`` of the twist is carried in the 15-dim error state as the
+  paper specifies but is therefore re-derived from ``δd`` at each prediction (it is redundant
+  with ``δd``); only ``B_r`` carries attitude information. :meth:`PoseFilter.nees` and
+  :meth:`PoseFilter.physical_covariance` use the 12 non-redundant components.
+* **[interpretation] sigma points** (eq. 32): ``λ = α²(L + κ) − L``, ``χ₀ = 0``,
+  ``χ_i = ±col_i(sqrt((L + λ) P))`` (Cholesky of the symmetrized ``P``, jitter on failure);
+  ``W0_m = λ/(L+λ)``, ``W0_c = W0_m + 1 − α² + β``, ``W_i = 1/(2(L+λ))``. Defaults ``α = 1``,
+  ``β = 2``, ``κ = 3 − L`` (Julier's rule; ALGORITHMS.md writes "λ = 3", it is ``L + λ = 3``,
+  so ``λ = −12`` and ``W0_m = −4``). ``kappa=0`` gives non-negative weights.
+* **[interpretation] mean of poses**: iterative Cayley mean (``|B̄| < 1e-10``, ≤ 10 iterations)
+  of the sigma-point poses, weights ``W_m``.
+* **[interpretation] measurement**: ``z = [D (3), Q]`` — the observed centroid and attitude
+  (eq. 41 combines them into a pose dual quaternion). ``innovation="position+rotation"``
+  (default): ``[D − d, B_r(q̂_pred⁻¹ ⊗ Q)]`` (6 numbers). ``innovation="twist"``: the full
+  ``B(q̂_pred⁻¹ ⊗ q̂_meas)`` (6 numbers; position enters through the dual half).
+* **[interpretation] update sigma points**: ``update_sigma="redraw"`` (default) draws fresh sigma
+  points from the predicted mean and covariance (so process noise enters ``P_xz``);
+  ``"propagated"`` reuses the predicted sigma points as Algorithm 1 does literally.
+* Gain with the weights (Paper 2 Step 5 omits ``W_i``): ``P_xz = Σ W_c δX δZᵀ``,
+  ``K = P_xz P_zz⁻¹``; injection ``q̂ ← q̂ ⊗ cayley⁻¹(δB)``, others additive.
+  ``covariance_update="standard"`` (``P⁻ − K P_zz Kᵀ``, Step 6) or ``"joseph"`` (with the
+  statistical linearization ``H = P_xzᵀ P⁻⁻¹``).
+* **[interpretation] noise** (Paper 2 gives none): 1σ per *nominal step* ``dt``; the process
+  variance is scaled by ``Δt/dt`` for other steps. Defaults :class:`ProcessNoise`,
+  :class:`MeasurementNoise`, :class:`InitialUncertainty` (= ``P₀ = 1e-2 I`` in error
+  coordinates).
+
+References
+----------
+Li, Zhuang, Peng, Zhao, *Pose estimation of non-cooperative space targets based on cross-source
+point cloud fusion*, Remote Sens. 13, 4239 (2021), doi:10.3390/rs13214239.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Literal
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from relnav.errors import ConfigError, InputError
+from relnav.fusion.dynamics import ClohessyWiltshire, TranslationModel
+from relnav.geometry.dualquat import (
+    _qmul,
+    cayley,
+    cayley_inverse,
+    cayley_mean,
+    dq_conjugate,
+    dq_from_rt,
+    dq_multiply,
+)
+from relnav.geometry.rotations import quat_to_matrix
+
+__all__ = [
+    "InitialUncertainty",
+    "MeasurementNoise",
+    "PoseFilter",
+    "ProcessNoise",
+    "TwistorUKF",
+    "UpdateInfo",
+    "quat_delta",
+]
+
+log = logging.getLogger(__name__)
+
+PAPER2_RATE_HZ = 0.22
+"""Paper 2 Table 3 sensor acquisition frequency, Hz."""
+
+
+# --------------------------------------------------------------------------------------------
+# noise settings (physical units, shared by the UKF and the EKF)
+# --------------------------------------------------------------------------------------------
+
+
+def _positive_fields(obj: Any) -> None:
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0.0):
+            raise ConfigError(f"{type(obj).__name__}.{f.name} must be a finite number >= 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ProcessNoise:
+    """Process noise, 1σ per nominal step.
+
+    Attributes
+    ----------
+    position : float
+        m (default 1e-4).
+    velocity : float
+        m/s (default 1e-4).
+    attitude : float
+        rad (default 4e-3 = pose-twist 1e-3, since ``B_r ≈ δθ/4``).
+    omega : float
+        rad/s (default 1e-3).
+    """
+
+    position: float = 1e-4
+    velocity: float = 1e-4
+    attitude: float = 4e-3
+    omega: float = 1e-3
+
+    def __post_init__(self) -> None:
+        _positive_fields(self)
+
+
+@dataclass(frozen=True)
+class MeasurementNoise:
+    """Measurement noise, 1σ: ``position`` (m, default 0.01), ``attitude`` (rad, default 1°).
+
+    The attitude noise is a small rotation about each body axis (``Q = q ⊗ exp(δθ)``).
+    """
+
+    position: float = 0.01
+    attitude: float = math.radians(1.0)
+
+    def __post_init__(self) -> None:
+        _positive_fields(self)
+
+    def covariance(self) -> np.ndarray:
+        """``(6, 6)`` covariance of ``[δp (m), δθ (rad)]``."""
+        return np.diag([self.position**2] * 3 + [self.attitude**2] * 3)
+
+
+@dataclass(frozen=True)
+class InitialUncertainty:
+    """Initial 1σ: position (m), velocity (m/s), attitude (rad), omega (rad/s).
+
+    Defaults ``0.1, 0.1, 0.4, 0.1`` equal Paper-2-style ``P₀ = 1e-2 I`` in the UKF's error
+    coordinates (``δθ ≈ 4 B_r``).
+    """
+
+    position: float = 0.1
+    velocity: float = 0.1
+    attitude: float = 0.4
+    omega: float = 0.1
+
+    def __post_init__(self) -> None:
+        _positive_fields(self)
+
+
+def _coerce(cls: type, value: Any, name: str) -> Any:
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        known = {f.name for f in fields(cls)}
+        bad = sorted(set(value) - known)
+        if bad:
+            raise ConfigError(f"{name}: unknown key(s) {bad}; accepted: {sorted(known)}")
+        return cls(**{k: float(v) for k, v in value.items()})
+    if isinstance(value, int | float) and cls is MeasurementNoise:
+        raise ConfigError(f"{name}: give a MeasurementNoise, a dict or a (6, 6) matrix")
+    raise ConfigError(f"{name}: expected {cls.__name__}, a dict or None, got {type(value).__name__}")
+
+
+@dataclass(frozen=True)
+class UpdateInfo:
+    """Outcome of one measurement update.
+
+    Attributes
+    ----------
+    accepted : bool
+        The measurement was applied.
+    nis : float
+        Normalized innovation squared ``νᵀ P_zz⁻¹ ν`` (NaN when not computed).
+    innovation : ndarray
+        Innovation in the filter's measurement coordinates (empty when rejected early).
+    message : str
+        Reason for a rejection.
+    """
+
+    accepted: bool
+    nis: float = float("nan")
+    innovation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    message: str = ""
+
+
+def quat_delta(omega: np.ndarray, dt: float) -> np.ndarray:
+    """``q_Δ = [ω/|ω| sin(½|ω|Δt), cos(½|ω|Δt)]`` (xyzw, Paper 2 eq. 31) for rate(s) ``(..., 3)``."""
+    th = np.asarray(omega, dtype=np.float64) * float(dt)
+    a = np.linalg.norm(th, axis=-1, keepdims=True)
+    half = 0.5 * a
+    # sin(a/2)/a with its series near 0
+    k = np.where(a < 1e-8, 0.5 - a * a / 48.0, np.sin(half) / np.where(a < 1e-8, 1.0, a))
+    return np.concatenate([k * th, np.cos(half)], axis=-1)
+
+
+def _canon_q(q: np.ndarray) -> np.ndarray:
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., 3:4] < 0.0, -q, q)
+
+
+def _rotvec_between(q: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """Body-frame rotation vector of ``q⁻¹ ⊗ q_true`` (rad)."""
+    dq = _qmul(q * np.array([-1.0, -1.0, -1.0, 1.0]), q_true)
+    return Rotation.from_quat(_canon_q(dq)).as_rotvec()
+
+
+def _sym(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + P.T)
+
+
+def _sqrt_psd(M: np.ndarray) -> np.ndarray:
+    """A square root ``S`` with ``S Sᵀ = M`` (Cholesky, jitter, eigen-clipping fallback)."""
+    M = _sym(M)
+    try:
+        return np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        pass
+    scale = max(float(np.trace(M)) / M.shape[0], 1e-300)
+    jitter = 1e-12 * scale
+    for _ in range(4):
+        try:
+            return np.linalg.cholesky(M + jitter * np.eye(M.shape[0]))
+        except np.linalg.LinAlgError:
+            jitter *= 100.0
+    w, V = np.linalg.eigh(M)
+    log.warning("covariance not positive definite (min eigenvalue %.3g); clipping", w.min())
+    w = np.clip(w, 1e-12 * max(w.max(), 1e-300), None)
+    return V * np.sqrt(w)
+
+
+def _check_vec(x: Any, n: int, name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape != (n,):
+        raise InputError(f"{name} must have shape ({n},), got {a.shape}")
+    return a
+
+
+# --------------------------------------------------------------------------------------------
+# common base
+# --------------------------------------------------------------------------------------------
+
+
+class PoseFilter:
+    """Common state handling of :class:`TwistorUKF` and :class:`relnav.fusion.ekf.QuaternionEKF`.
+
+    Nominal state: ``position`` ``d`` (m, sensor frame), ``velocity`` (m/s), ``quaternion``
+    (xyzw, ``R_sensor_body``, ``w ≥ 0``), ``omega`` (rad/s, body frame). Subclasses implement
+    ``_predict``, ``_update`` and the native covariance layout.
+    """
+
+    name = "base"
+    dim = 12
+
+    def __init__(
+        self,
+        n_mean_motion: float = 0.0,
+        dt: float = 1.0 / PAPER2_RATE_HZ,
+        q: ProcessNoise | Mapping[str, float] | None = None,
+        r: MeasurementNoise | Mapping[str, float] | np.ndarray | None = None,
+        *,
+        p0: InitialUncertainty | Mapping[str, float] | None = None,
+        position0: Any = None,
+        velocity0: Any = None,
+        quat0: Any = None,
+        omega0: Any = None,
+        translation_model: TranslationModel = "cw",
+        lvlh_axes: str | np.ndarray | None = None,
+        gate_probability: float | None = None,
+    ) -> None:
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ConfigError(f"nominal time step dt must be > 0 s, got {dt!r}")
+        self.dt = dt
+        self.dynamics = ClohessyWiltshire(
+            n_mean_motion, lvlh_axes=lvlh_axes, model=translation_model
+        )
+        self.q_noise: ProcessNoise = _coerce(ProcessNoise, q, "q")
+        self.R = self._measurement_cov(r)
+        self.p0: InitialUncertainty = _coerce(InitialUncertainty, p0, "p0")
+        if gate_probability is not None and not (0.0 < float(gate_probability) < 1.0):
+            raise ConfigError(f"gate_probability must be in (0, 1), got {gate_probability!r}")
+        self.gate_probability = None if gate_probability is None else float(gate_probability)
+        self._d = np.zeros(3)
+        self._v = np.zeros(3)
+        self._q = np.array([0.0, 0.0, 0.0, 1.0])
+        self._w = np.zeros(3)
+        self._P = np.eye(self.dim)
+        self.initialize(
+            position=np.zeros(3) if position0 is None else position0,
+            quat=np.array([0.0, 0.0, 0.0, 1.0]) if quat0 is None else quat0,
+            velocity=velocity0,
+            omega=omega0,
+        )
+
+    # --- configuration helpers ---------------------------------------------------------------
+
+    @staticmethod
+    def _measurement_cov(r: Any) -> np.ndarray:
+        if isinstance(r, np.ndarray | list | tuple) and not isinstance(r, Mapping):
+            R = np.asarray(r, dtype=np.float64)
+            if R.shape == (6,):
+                R = np.diag(R)
+            if R.shape != (6, 6) or not np.all(np.isfinite(R)):
+                raise ConfigError(f"r must be a finite (6, 6) covariance, got shape {R.shape}")
+            if np.linalg.eigvalsh(_sym(R)).min() <= 0.0:
+                raise ConfigError("r must be positive definite")
+            return _sym(R)
+        R = _coerce(MeasurementNoise, r, "r").covariance()
+        if np.any(np.diag(R) <= 0.0):
+            raise ConfigError("measurement noise must be > 0 for position and attitude")
+        return R
+
+    def _phys_process_var(self, dt: float) -> np.ndarray:
+        """Physical process variances ``(12,)`` ``[d, v, θ, ω]`` for a step of ``dt`` s."""
+        qn = self.q_noise
+        s = abs(dt) / self.dt
+        return s * np.repeat(
+            np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3
+        )
+
+    # --- state ------------------------------------------------------------------------------
+
+    def initialize(
+        self,
+        position: Any,
+        quat: Any,
+        velocity: Any = None,
+        omega: Any = None,
+        p0: InitialUncertainty | Mapping[str, float] | None = None,
+    ) -> None:
+        """(Re)set the state and covariance.
+
+        Parameters
+        ----------
+        position : (3,) array_like
+            m, sensor frame.
+        quat : (4,) array_like
+            ``R_sensor_body`` (xyzw), normalized here.
+        velocity, omega : (3,) array_like, optional
+            m/s and rad/s (body); default zero.
+        p0 : InitialUncertainty or dict, optional
+            Initial 1σ (default: the constructor's).
+        """
+        d = _check_vec(position, 3, "position")
+        q = _check_vec(quat, 4, "quat")
+        v = np.zeros(3) if velocity is None else _check_vec(velocity, 3, "velocity")
+        w = np.zeros(3) if omega is None else _check_vec(omega, 3, "omega")
+        nq = float(np.linalg.norm(q))
+        if not (np.all(np.isfinite(np.r_[d, q, v, w])) and nq > 0.0):
+            raise InputError("initial state must be finite with a non-zero quaternion")
+        if p0 is not None:
+            self.p0 = _coerce(InitialUncertainty, p0, "p0")
+        self._d, self._v, self._q, self._w = d.copy(), v.copy(), _canon_q(q), w.copy()
+        s = self.p0
+        phys = np.repeat(np.array([s.position, s.velocity, s.attitude, s.omega]) ** 2, 3)
+        self._P = self._native_from_phys_var(phys)
+        self._on_reset()
+
+    def _on_reset(self) -> None:
+        """Hook: drop cached sigma points etc."""
+
+    def _native_from_phys_var(self, phys_var: np.ndarray) -> np.ndarray:
+        """Diagonal native covariance from physical variances ``[d, v, θ, ω]`` (12,)."""
+        return np.diag(phys_var)
+
+    @property
+    def position(self) -> np.ndarray:
+        """Target reference point in the sensor frame ``(3,)``, m."""
+        return self._d.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Its velocity ``(3,)``, m/s (sensor frame)."""
+        return self._v.copy()
+
+    @property
+    def quaternion(self) -> np.ndarray:
+        """Attitude ``R_sensor_body`` as a unit quaternion ``(4,)`` xyzw, ``w ≥ 0``."""
+        return self._q.copy()
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Body angular rate ``(3,)``, rad/s."""
+        return self._w.copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Native error-state covariance (``dim × dim``)."""
+        return self._P.copy()
+
+    def pose_matrix(self) -> np.ndarray:
+        """``T_sensor_body`` ``(4, 4)`` of the current estimate."""
+        T = np.eye(4)
+        T[:3, :3] = quat_to_matrix(self._q)
+        T[:3, 3] = self._d
+        return T
+
+    def _phys_jacobian(self) -> np.ndarray:
+        """``(12, dim)`` map from native error coordinates to ``[δd, δv, δθ, δω]``."""
+        return np.eye(12)
+
+    def physical_covariance(self) -> np.ndarray:
+        """``(12, 12)`` covariance of ``[δd (m), δv (m/s), δθ (rad, body), δω (rad/s)]``."""
+        J = self._phys_jacobian()
+        return _sym(J @ self._P @ J.T)
+
+    def state_sigma(self) -> dict[str, np.ndarray]:
+        """1σ bounds: ``{"position" (m), "velocity" (m/s), "attitude" (rad), "omega" (rad/s)}``."""
+        s = np.sqrt(np.clip(np.diag(self.physical_covariance()), 0.0, None))
+        return {"position": s[:3], "velocity": s[3:6], "attitude": s[6:9], "omega": s[9:12]}
+
+    def error_vector(
+        self, position: Any, velocity: Any, quat_xyzw: Any, omega: Any
+    ) -> np.ndarray:
+        """True minus estimated state ``(12,)`` ``[δd, δv, δθ, δω]`` (``δθ``: body rotation
+        vector of ``q⁻¹ ⊗ q_true``)."""
+        p = _check_vec(position, 3, "position")
+        v = _check_vec(velocity, 3, "velocity")
+        qt = _check_vec(quat_xyzw, 4, "quat_xyzw")
+        w = _check_vec(omega, 3, "omega")
+        return np.concatenate([p - self._d, v - self._v, _rotvec_between(self._q, qt), w - self._w])
+
+    def nees(self, position: Any, velocity: Any, quat_xyzw: Any, omega: Any) -> float:
+        """Normalized estimation error squared over the 12 physical components (χ²₁₂ if
+        consistent)."""
+        e = self.error_vector(position, velocity, quat_xyzw, omega)
+        P = self.physical_covariance()
+        return float(e @ np.linalg.solve(P, e))
+
+    # --- steps ------------------------------------------------------------------------------
+
+    def predict(self, dt: float | None = None) -> None:
+        """Propagate the state and covariance by ``dt`` seconds (default: the nominal ``dt``).
+
+        Raises
+        ------
+        InputError
+            ``dt`` negative or not finite.
+        """
+        step = self.dt if dt is None else float(dt)
+        if not math.isfinite(step) or step < 0.0:
+            raise InputError(f"prediction step must be finite and >= 0 s, got {dt!r}")
+        if step == 0.0:
+            return
+        self._predict(step)
+
+    def update(
+        self, position: Any, quat_xyzw: Any, R: np.ndarray | MeasurementNoise | None = None
+    ) -> UpdateInfo:
+        """Measurement update with an observed centroid position and attitude.
+
+        Parameters
+        ----------
+        position : (3,) array_like
+            Observed reference point in the sensor frame, m.
+        quat_xyzw : (4,) array_like
+            Observed attitude ``R_sensor_body`` (any sign, normalized here).
+        R : (6, 6) array_like or MeasurementNoise, optional
+            Covariance of ``[δp (m), δθ (rad)]`` for this measurement (default: the filter's).
+
+        Returns
+        -------
+        UpdateInfo
+            ``accepted=False`` (state unchanged) for a NaN/infinite observation or covariance, a
+            zero quaternion, or an innovation failing the ``gate_probability`` χ² gate.
+
+        Raises
+        ------
+        InputError
+            Wrong shapes.
+        """
+        p = _check_vec(position, 3, "position")
+        q = _check_vec(quat_xyzw, 4, "quat_xyzw")
+        if R is None:
+            Rm = self.R
+        elif isinstance(R, MeasurementNoise):
+            Rm = R.covariance()
+        else:
+            Rm = np.asarray(R, dtype=np.float64)
+            if Rm.shape != (6, 6):
+                raise InputError(f"R must have shape (6, 6), got {Rm.shape}")
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+            return UpdateInfo(False, message="non-finite observation")
+        if not np.all(np.isfinite(Rm)):
+            return UpdateInfo(False, message="non-finite measurement covariance")
+        nq = float(np.linalg.norm(q))
+        if nq < 1e-9:
+            return UpdateInfo(False, message="zero quaternion")
+        try:
+            return self._update(p, q / nq, _sym(Rm))
+        except np.linalg.LinAlgError as e:
+            return UpdateInfo(False, message=f"singular innovation covariance ({e})")
+
+    def _gate(self, nis: float, m: int) -> str:
+        if not math.isfinite(nis):
+            return "non-finite innovation"
+        if self.gate_probability is not None and nis > chi2.ppf(self.gate_probability, m):
+            return f"gated (NIS {nis:.3g} > χ²_{m}({self.gate_probability}))"
+        return ""
+
+    def _predict(self, dt: float) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _update(self, p: np.ndarray, q: np.ndarray, R: np.ndarray) -> UpdateInfo:  # pragma: no cover
+        raise NotImplementedError
+
+    def settings(self) -> dict[str, Any]:
+        """The filter's configuration as plain values (for result metadata)."""
+        return {
+            "filter": self.name,
+            "n_mean_motion": self.dynamics.n,
+            "dt": self.dt,
+            "translation_model": self.dynamics.model,
+            "lvlh_axes": self.dynamics.M.tolist(),
+            "q": asdict(self.q_noise),
+            "r": np.sqrt(np.diag(self.R)).tolist(),
+            "p0": asdict(self.p0),
+            "gate_probability": self.gate_probability,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(position={np.round(self._d, 4).tolist()}, "
+            f"quat={np.round(self._q, 4).tolist()}, omega={np.round(self._w, 5).tolist()})"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# twistor UKF
+# --------------------------------------------------------------------------------------------
+
+Innovation = Literal["position+rotation", "twist"]
+CovUpdate = Literal["standard", "joseph"]
+UpdateSigma = Literal["redraw", "propagated"]
+
+
+class TwistorUKF(PoseFilter):
+    """Twist (Cayley) dual-quaternion UKF with Clohessy–Wiltshire translation (Paper 2).
+
+    Parameters
+    ----------
+    n_mean_motion : float
+        CW mean motion, rad/s (0 = Paper 2 lab set-up, force-free).
+    dt : float
+        Nominal step, s (default ``1/0.22``, Paper 2 Table 3); the process noise is per step.
+    q : ProcessNoise or dict, optional
+        Process noise (default :class:`ProcessNoise`).
+    r : MeasurementNoise, dict or (6, 6) array_like, optional
+        Measurement noise of ``[position (m), attitude (rad)]`` (default
+        :class:`MeasurementNoise`).
+    alpha, beta, kappa : float
+        Sigma-point parameters; ``kappa=None`` → ``3 − L``.
+    p0 : InitialUncertainty or dict, optional
+        Initial 1σ (default = ``P₀ = 1e-2 I`` in error coordinates).
+    position0, velocity0, quat0, omega0 : array_like, optional
+        Initial state (default zeros / identity).
+    translation_model : {"cw", "euler"}
+        Exact CW transition or Paper 2 eq. 38's Euler step.
+    lvlh_axes : str or (3, 3), optional
+        Sensor → LVLH axes (:func:`relnav.fusion.dynamics.axis_permutation`).
+    innovation : {"position+rotation", "twist"}
+        Measurement coordinates (module docstring).
+    update_sigma : {"redraw", "propagated"}
+        Sigma points used by the update.
+    covariance_update : {"standard", "joseph"}
+    gate_probability : float, optional
+        Reject measurements whose NIS exceeds the χ² quantile (default: no gate).
+
+    Examples
+    --------
+    >>> ukf = TwistorUKF(dt=4.5, omega0=[0, 0, np.radians(5)])
+    >>> ukf.predict()
+    >>> info = ukf.update([3.0, 0.0, 0.0], [0.0, 0.0, 0.19509, 0.98079])
+    >>> ukf.covariance.shape
+    (15, 15)
+    """
+
+    name = "ukf"
+    dim = 15
+
+    def __init__(
+        self,
+        n_mean_motion: float = 0.0,
+        dt: float = 1.0 / PAPER2_RATE_HZ,
+        q: ProcessNoise | Mapping[str, float] | None = None,
+        r: MeasurementNoise | Mapping[str, float] | np.ndarray | None = None,
+        alpha: float = 1.0,
+        beta: float = 2.0,
+        kappa: float | None = None,
+        *,
+        p0: InitialUncertainty | Mapping[str, float] | None = None,
+        position0: Any = None,
+        velocity0: Any = None,
+        quat0: Any = None,
+        omega0: Any = None,
+        translation_model: TranslationModel = "cw",
+        lvlh_axes: str | np.ndarray | None = None,
+        innovation: Innovation = "position+rotation",
+        update_sigma: UpdateSigma = "redraw",
+        covariance_update: CovUpdate = "standard",
+        gate_probability: float | None = None,
+    ) -> None:
+        L = self.dim
+        self.alpha = float(alpha)
+        self.beta = float(beta)
+        self.kappa = float(3 - L if kappa is None else kappa)
+        if not (math.isfinite(self.alpha) and self.alpha > 0.0 and math.isfinite(self.beta)):
+            raise ConfigError(f"alpha must be > 0 and beta finite, got {alpha!r}, {beta!r}")
+        self.lam = self.alpha**2 * (L + self.kappa) - L
+        if not (math.isfinite(self.lam) and L + self.lam > 0.0):
+            raise ConfigError(
+                f"sigma-point spread L + λ = α²(L + κ) must be > 0, got {L + self.lam!r} "
+                f"(alpha={alpha}, kappa={kappa})"
+            )
+        c = L + self.lam
+        self.Wm = np.full(2 * L + 1, 0.5 / c)
+        self.Wc = self.Wm.copy()
+        self.Wm[0] = self.lam / c
+        self.Wc[0] = self.lam / c + (1.0 - self.alpha**2 + self.beta)
+        if innovation not in ("position+rotation", "twist"):
+            raise ConfigError(f"innovation must be 'position+rotation' or 'twist', got {innovation!r}")
+        if update_sigma not in ("redraw", "propagated"):
+            raise ConfigError(f"update_sigma must be 'redraw' or 'propagated', got {update_sigma!r}")
+        if covariance_update not in ("standard", "joseph"):
+            raise ConfigError(
+                f"covariance_update must be 'standard' or 'joseph', got {covariance_update!r}"
+            )
+        self.innovation: Innovation = innovation
+        self.update_sigma: UpdateSigma = update_sigma
+        self.covariance_update: CovUpdate = covariance_update
+        self._prop: dict[str, np.ndarray] | None = None
+        self.mean_iterations = 0
+        super().__init__(
+            n_mean_motion,
+            dt,
+            q,
+            r,
+            p0=p0,
+            position0=position0,
+            velocity0=velocity0,
+            quat0=quat0,
+            omega0=omega0,
+            translation_model=translation_model,
+            lvlh_axes=lvlh_axes,
+            gate_probability=gate_probability,
+        )
+
+    # --- coordinates --------------------------------------------------------------------------
+
+    def _on_reset(self) -> None:
+        self._prop = None
+
+    def _native_from_phys_var(self, phys_var: np.ndarray) -> np.ndarray:
+        v = np.zeros(15)
+        v[0:6] = phys_var[0:6]
+        v[6:9] = phys_var[6:9] / 16.0  # B_r ≈ δθ/4
+        v[9:12] = phys_var[0:3] / 16.0  # B_d ≈ R_bsᵀ δd/4 (redundant with δd)
+        v[12:15] = phys_var[9:12]
+        return np.diag(v)
+
+    def _phys_jacobian(self) -> np.ndarray:
+        J = np.zeros((12, 15))
+        J[0:6, 0:6] = np.eye(6)
+        J[6:9, 6:9] = 4.0 * np.eye(3)
+        J[9:12, 12:15] = np.eye(3)
+        return J
+
+    def _pose_dq(self) -> np.ndarray:
+        return dq_from_rt(self._q, self._d)
+
+    def sigma_points(self) -> np.ndarray:
+        """Error-state sigma points ``(2L+1, L)`` ``χ`` around the current mean."""
+        L = self.dim
+        S = _sqrt_psd((L + self.lam) * self._P)
+        chi = np.zeros((2 * L + 1, L))
+        chi[1 : L + 1] = S.T
+        chi[L + 1 :] = -S.T
+        return chi
+
+    def _apply_sigma(
+        self, chi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Nominal states of error sigma points: ``d, v, q (xyzw), ω`` per point."""
+        d = self._d + chi[:, 0:3]
+        v = self._v + chi[:, 3:6]
+        qh = dq_multiply(self._pose_dq(), cayley_inverse(chi[:, 6:12]))
+        q = _canon_q(qh[:, :4])
+        w = self._w + chi[:, 12:15]
+        return d, v, q, w
+
+    # --- predict ------------------------------------------------------------------------------
+
+    def _predict(self, dt: float) -> None:
+        chi = self.sigma_points()
+        d, v, q, w = self._apply_sigma(chi)
+        # propagate: attitude by body rates (right multiplication), translation by CW
+        q = _canon_q(_qmul(q, quat_delta(w, dt)))
+        d, v = self.dynamics.propagate(d, v, dt)
+        qh = dq_from_rt(q, d)  # rebuild the dual part from (q, d)
+        d_m = self.Wm @ d
+        v_m = self.Wm @ v
+        w_m = self.Wm @ w
+        mean_dq, it, ok = cayley_mean(qh, self.Wm, init=qh[0])
+        self.mean_iterations = it
+        if not ok:
+            log.debug("Cayley mean not converged after %d iterations", it)
+        q_m = _canon_q(mean_dq[:4])
+        mean_dq = dq_from_rt(q_m, d_m)
+        dX = np.empty_like(chi)
+        dX[:, 0:3] = d - d_m
+        dX[:, 3:6] = v - v_m
+        dX[:, 6:12] = cayley(dq_multiply(dq_conjugate(mean_dq), qh))
+        dX[:, 12:15] = w - w_m
+        P = (dX * self.Wc[:, None]).T @ dX
+        P += self._native_from_phys_var(self._phys_process_var(dt))
+        self._d, self._v, self._q, self._w = d_m, v_m, q_m, w_m
+        self._P = _sym(P)
+        self._prop = {"dX": dX, "d": d, "q": q}
+
+    # --- update -------------------------------------------------------------------------------
+
+    def _meas_cov(self, R: np.ndarray) -> np.ndarray:
+        """Measurement covariance in the filter's measurement coordinates."""
+        if self.innovation == "position+rotation":
+            J = np.zeros((6, 6))
+            J[0:3, 0:3] = np.eye(3)
+            J[3:6, 3:6] = 0.25 * np.eye(3)
+            return _sym(J @ R @ J.T)
+        # twist [B_r, B_d]: B_r ≈ δθ/4, B_d ≈ R_bs δp / 4 (relative translation in body axes)
+        Rbs = quat_to_matrix(self._q).T
+        J = np.zeros((6, 6))
+        J[0:3, 3:6] = 0.25 * np.eye(3)
+        J[3:6, 0:3] = 0.25 * Rbs
+        return _sym(J @ R @ J.T)
+
+    def _meas_of(self, d: np.ndarray, q: np.ndarray, mean_dq_inv: np.ndarray) -> np.ndarray:
+        """Measurement coordinates of poses ``(d, q)`` relative to the predicted pose."""
+        B = cayley(dq_multiply(mean_dq_inv, dq_from_rt(q, d)))
+        if self.innovation == "position+rotation":
+            return np.concatenate([d, B[..., 0:3]], axis=-1)
+        return B
+
+    def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
+        mean_inv = dq_conjugate(self._pose_dq())
+        if self.update_sigma == "propagated" and self._prop is not None:
+            dX = self._prop["dX"]
+            d_i, q_i = self._prop["d"], self._prop["q"]
+        else:
+            dX = self.sigma_points()
+            d_i, _, q_i, _ = self._apply_sigma(dX)
+        Z = self._meas_of(d_i, q_i, mean_inv)
+        z_hat = self.Wm @ Z
+        dZ = Z - z_hat
+        Rz = self._meas_cov(R)
+        Pzz = _sym((dZ * self.Wc[:, None]).T @ dZ + Rz)
+        Pxz = (dX * self.Wc[:, None]).T @ dZ
+        z = self._meas_of(p, q_meas, mean_inv)
+        nu = z - z_hat
+        nis = float(nu @ np.linalg.solve(Pzz, nu))
+        reason = self._gate(nis, nu.size)
+        if reason:
+            return UpdateInfo(False, nis, nu, reason)
+        K = np.linalg.solve(Pzz, Pxz.T).T
+        dx = K @ nu
+        P_prior = self._P
+        if self.covariance_update == "standard":
+            P = P_prior - K @ Pzz @ K.T
+        else:
+            H = np.linalg.solve(P_prior, Pxz).T
+            IKH = np.eye(self.dim) - K @ H
+            P = IKH @ P_prior @ IKH.T + K @ Rz @ K.T
+        self._d = self._d + dx[0:3]
+        self._v = self._v + dx[3:6]
+        qh = dq_multiply(self._pose_dq(), cayley_inverse(dx[6:12]))
+        self._q = _canon_q(qh[:4])
+        self._w = self._w + dx[12:15]
+        self._P = _sym(P)
+        self._prop = None
+        return UpdateInfo(True, nis, nu, "")
+
+    def settings(self) -> dict[str, Any]:
+        """Configuration as plain values."""
+        out = super().settings()
+        out.update(
+            alpha=self.alpha,
+            beta=self.beta,
+            kappa=self.kappa,
+            innovation=self.innovation,
+            update_sigma=self.update_sigma,
+            covariance_update=self.covariance_update,
+        )
+        return out
