@@ -28,7 +28,9 @@ TABLE_KEYS = (
 def demo(
     out: Path = typer.Option(Path("relnav-demo"), "--out", "-o", help="Output folder."),
     preset: str = typer.Option(DEMO_PRESET, "--preset", help="Scenario preset to simulate."),
-    frames: int = typer.Option(DEMO_FRAMES, "--frames", help="Number of frames."),
+    frames: int = typer.Option(
+        DEMO_FRAMES, "--frames", help="Frames (the first N of the preset, at its own rate)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Simulation seed."),
     method: list[str] = typer.Option(
         list(DEMO_METHODS), "--method", "-m", help="Methods to compare (first = main)."
@@ -52,9 +54,9 @@ def demo(
 
     out.mkdir(parents=True, exist_ok=True)
     seq_dir = out / "sequence"
-    scenario = get_preset(preset, frames=frames, seed=seed)
+    scenario = get_preset(preset, max_frames=frames, seed=seed)
     with progress_bar() as bar:
-        task = bar.add_task(f"simulate {preset}", total=scenario.frames)
+        task = bar.add_task(f"simulate {preset}", total=min(frames, scenario.frames))
         simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
         seq = ScanSequence(seq_dir)
         runs = {}

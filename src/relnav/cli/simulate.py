@@ -105,7 +105,15 @@ def simulate(
         ..., help="Preset name (relnav config list) or scenario YAML file."
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output sequence folder."),
-    frames: int | None = typer.Option(None, "--frames", "-n", min=1, help="Number of frames."),
+    frames: int | None = typer.Option(
+        None, "--frames", "-n", min=1, help="Number of frames along the whole path."
+    ),
+    max_frames: int | None = typer.Option(
+        None,
+        "--max-frames",
+        min=1,
+        help="Simulate only the first N frames (keeps the scenario's per-frame motion).",
+    ),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Scenario seed."),
     target_mesh: Path | None = typer.Option(
         None, "--target-mesh", help="Mesh file replacing the scenario's target."
@@ -145,15 +153,18 @@ def simulate(
         scale_to=scale_to,
         params=_params(param),
     )
+    if max_frames is not None:
+        sc.max_frames = max_frames
+    n_sim = sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
     with progress_bar() as bar:
-        task = bar.add_task(f"simulate {sc.name}", total=sc.frames)
+        task = bar.add_task(f"simulate {sc.name}", total=n_sim)
         summary = run(
             sc,
             out,
             overwrite=overwrite,
             progress=lambda done, total: bar.update(task, completed=done),
         )
-    table = Table(title=f"{sc.name}: {sc.frames} frames, seed {sc.seed} → {out}")
+    table = Table(title=f"{sc.name}: {n_sim} frames, seed {sc.seed} → {out}")
     for col, just in (
         ("sensor", "left"),
         ("folder", "left"),

@@ -52,8 +52,18 @@ FPFH_DIM = 3 * NR_BINS  # 33
 
 @njit(cache=True)
 def _pair_features(
-    p1x: float, p1y: float, p1z: float, n1x: float, n1y: float, n1z: float,
-    p2x: float, p2y: float, p2z: float, n2x: float, n2y: float, n2z: float,
+    p1x: float,
+    p1y: float,
+    p1z: float,
+    n1x: float,
+    n1y: float,
+    n1z: float,
+    p2x: float,
+    p2y: float,
+    p2z: float,
+    n2x: float,
+    n2y: float,
+    n2z: float,
 ) -> tuple[float, float, float, float]:
     """PCL ``computePairFeatures``: ``(f1, f2, f3, f4)``; zeros for degenerate pairs."""
     dx = p2x - p1x
@@ -126,9 +136,7 @@ def _fpfh_kernel(
     bd = np.empty(n)
     valid_n = np.empty(n, dtype=np.bool_)
     for i in range(n):
-        valid_n[i] = (
-            np.isfinite(Nrm[i, 0]) and np.isfinite(Nrm[i, 1]) and np.isfinite(Nrm[i, 2])
-        )
+        valid_n[i] = np.isfinite(Nrm[i, 0]) and np.isfinite(Nrm[i, 1]) and np.isfinite(Nrm[i, 2])
     # SPFH of every needed point
     row = np.full(n, -1, dtype=np.int64)
     n_need = 0
@@ -150,8 +158,18 @@ def _fpfh_kernel(
             if j == i or not valid_n[j]:
                 continue
             f1, f2, f3, _ = _pair_features(
-                P[i, 0], P[i, 1], P[i, 2], Nrm[i, 0], Nrm[i, 1], Nrm[i, 2],
-                P[j, 0], P[j, 1], P[j, 2], Nrm[j, 0], Nrm[j, 1], Nrm[j, 2],
+                P[i, 0],
+                P[i, 1],
+                P[i, 2],
+                Nrm[i, 0],
+                Nrm[i, 1],
+                Nrm[i, 2],
+                P[j, 0],
+                P[j, 1],
+                P[j, 2],
+                Nrm[j, 0],
+                Nrm[j, 1],
+                Nrm[j, 2],
             )
             cnt[_bin11(f1, -np.pi, 2.0 * np.pi)] += 1
             cnt[NR_BINS + _bin11(f2, -1.0, 2.0)] += 1

@@ -15,26 +15,29 @@ reconstruction of ALGORITHMS §A.1, consistent with every statement of Paper 1:
 
 Modes
 -----
-``mode="exact"`` (default) returns exactly the all-pairs histograms. Keypoints are visited along
-a greedy nearest-neighbour tour of their positions, so consecutive supports overlap heavily; the integer
-pair-count histogram of the current support is updated incrementally: each point leaving the
-support subtracts its pairs with the remaining members, each point entering adds its pairs with
-the members (cost ``∝ |S Δ S'|·|S|`` instead of ``|S|²``; a support is rebuilt from scratch when
-that is cheaper). Integer counts make the result identical to brute force, whatever the order.
-With ``normalization="max"`` the bin edges change per keypoint, so exact mode falls back to a
-per-keypoint ``O(n²)`` loop (slow for large supports).
+``mode="exact"`` (default) returns exactly the all-pairs histograms. Keypoints are visited
+along a greedy nearest-neighbour tour of their positions, so consecutive supports overlap
+heavily; the integer pair-count histogram of the current support is updated incrementally: each
+point leaving the support subtracts its pairs with the remaining members, each point entering
+adds its pairs with the members (cost ``∝ |S Δ S'|·|S|`` instead of ``|S|²``; a support is
+rebuilt from scratch when that is cheaper). Integer counts make the result identical to brute
+force, whatever the order. With ``normalization="max"`` the bin edges change per keypoint, so
+the histograms are computed per keypoint in ``O(n²)`` (slow for large supports).
 
-``mode="fast"`` is a documented, seeded approximation (``seed``, default 0):
+``mode="fast"`` is a documented approximation:
 
-* ``fast_method="subsample"`` (default): one random subset ``Q`` of the cloud is drawn with
-  keep probability ``f = min(1, n_max / median |S|)`` (``n_max = 400``, ALGORITHMS §A.1);
-  each keypoint's histogram is the exact all-pairs histogram of ``(S ∩ Q) ∪ {p}``, computed
-  with the same incremental scheme. Keypoints whose subsampled support has fewer than 5 points
-  use their full support (exact). The subset depends on point indices only, so the result is
-  invariant to rigid motions of the cloud.
-* ``fast_method="pairs"``: per keypoint, ``n_pairs`` (default 2000) distinct-point pairs drawn
-  uniformly with replacement from the support (all pairs when there are fewer), seeded per
-  keypoint index.
+* ``fast_method="anchors"`` (default): exact histograms are computed only at *anchor*
+  keypoints — a greedy Poisson-disk subset in index order with spacing
+  ``anchor_spacing · r`` (default ``0.1·r`` = 8·Tr at the default radius) — and every keypoint
+  gets the inverse-squared-distance weighted mean of the pmfs of its ``n_anchors`` (4) nearest
+  anchors (anchors get their own exact value). The HoD of a moving support ball varies
+  smoothly with its centre, so this is far more accurate than subsampling at equal cost
+  (satellite benchmark, 880 points: mean per-keypoint L1 to exact ≈ 0.009 for HoD-S, 0.019 for
+  HoD; subsampling to 400 points: 0.09 / 0.18). Deterministic, rigid-motion invariant.
+* ``fast_method="subsample"``: one random subset ``Q`` of the cloud (seeded by ``seed``) with
+  keep probability ``f = min(1, n_max / median |S|)`` (``n_max = 400``, ALGORITHMS §A.1); each
+  keypoint's histogram is the exact histogram of ``(S ∩ Q) ∪ {p}``. Keypoints whose subsampled
+  support has fewer than 5 points use their full support.
 
 Invalid rows (NaN): fewer than ``MIN_SUPPORT`` = 5 support points (keypoint included), or a
 zero maximum distance with ``normalization="max"``.
@@ -64,21 +67,15 @@ log = logging.getLogger(__name__)
 HOD_COARSE_BINS = 40
 HOD_FINE_BINS = 200
 
-_OPTIONS = ("mode", "normalization", "n_max", "n_pairs", "fast_method", "seed")
-
-
-@njit(cache=True)
-def _pair_bins(
-    ax: float, ay: float, az: float, bx: float, by: float, bz: float, norm: float, nc: int,
-    nf: int,
-) -> tuple[int, int]:
-    dx = ax - bx
-    dy = ay - by
-    dz = az - bz
-    x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
-    c = int(x * nc)
-    f = int(x * nf)
-    return min(c, nc - 1), min(f, nf - 1)
+_OPTIONS = (
+    "mode",
+    "normalization",
+    "fast_method",
+    "anchor_spacing",
+    "n_anchors",
+    "n_max",
+    "seed",
+)
 
 
 @njit(cache=True)
@@ -377,200 +374,27 @@ def _hod_brute(
 
 
 @njit(cache=True)
-def _splitmix(state: np.uint64) -> tuple[np.uint64, np.uint64]:
-    state = state + np.uint64(0x9E3779B97F4A7C15)
-    z = state
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return state, z ^ (z >> np.uint64(31))
+def _poisson_anchors(C: np.ndarray, spacing: float) -> np.ndarray:
+    """Greedy Poisson-disk subset of the centres ``C`` (K, 3) in index order.
 
-
-@njit(cache=True)
-def _hod_pairs(
-    P: np.ndarray,
-    kp: np.ndarray,
-    radius: float,
-    norm: float,
-    nc: int,
-    nf: int,
-    n_pairs: int,
-    seed: int,
-    min_support: int,
-):
-    """Fast mode ``"pairs"``: ``n_pairs`` random pairs of the support per keypoint."""
-    N = P.shape[0]
-    K = kp.shape[0]
-    out = np.full((K, nc + nf), np.nan, dtype=np.float32)
-    sizes = np.zeros(K, dtype=np.int64)
-    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
-    buf = np.empty(max(N, 1), dtype=np.int64)
-    bd = np.empty(max(N, 1))
-    S = np.empty(max(N, 1), dtype=np.int64)
-    mark = np.zeros(max(N, 1), dtype=np.int64)
-    hc = np.zeros(nc, dtype=np.int64)
-    hf = np.zeros(max(nf, 1), dtype=np.int64)
-    for k in range(K):
-        i0 = kp[k]
-        n = _grid_query(spts, lo, h, dims, start, sidx, P[i0], radius, buf, bd)
-        sizes[k] = n
-        if n < min_support:
-            continue
-        # support in index order (independent of the grid layout → rigid-motion invariant)
-        if n * 8 < N:
-            S[:n] = np.sort(buf[:n])
-        else:
-            for i in range(n):
-                mark[buf[i]] = k + 1
-            c = 0
-            for j in range(N):
-                if mark[j] == k + 1:
-                    S[c] = j
-                    c += 1
-        hc[:] = 0
-        hf[:] = 0
-        total = n * (n - 1) // 2
-        if total <= n_pairs:
-            for i in range(n):
-                a = S[i]
-                for j in range(i + 1, n):
-                    b = S[j]
-                    c_, f_ = _pair_bins(
-                        P[a, 0], P[a, 1], P[a, 2], P[b, 0], P[b, 1], P[b, 2], norm, nc,
-                        max(nf, 1),
-                    )
-                    hc[c_] += 1
-                    hf[f_] += 1
-            cnt = total
-        else:
-            st = np.uint64(seed) * np.uint64(0x100000001B3) + np.uint64(i0)
-            st, _ = _splitmix(st)
-            cnt = 0
-            nn = np.uint64(n)
-            while cnt < n_pairs:
-                st, r1 = _splitmix(st)
-                st, r2 = _splitmix(st)
-                ia = int(r1 % nn)
-                ib = int(r2 % nn)
-                if ia == ib:
-                    continue
-                a = S[ia]
-                b = S[ib]
-                c_, f_ = _pair_bins(
-                    P[a, 0], P[a, 1], P[a, 2], P[b, 0], P[b, 1], P[b, 2], norm, nc, max(nf, 1)
-                )
-                hc[c_] += 1
-                hf[f_] += 1
-                cnt += 1
-        for b in range(nc):
-            out[k, b] = hc[b] / cnt
-        for b in range(nf):
-            out[k, nc + b] = hf[b] / cnt
-    return out, sizes
-
-
-def _validate(
-    points: np.ndarray,
-    keypoint_idx: np.ndarray,
-    radius: float,
-    mode: str,
-    normalization: str,
-    fast_method: str,
-    n_max: int,
-    n_pairs: int,
-    unknown: dict[str, object],
-) -> tuple[np.ndarray, np.ndarray]:
-    if unknown:
-        raise ConfigError(f"unknown HoD option(s) {sorted(unknown)}; valid: {', '.join(_OPTIONS)}")
-    if mode not in ("exact", "fast"):
-        raise ConfigError(f"HoD mode must be 'exact' or 'fast', got {mode!r}")
-    if normalization not in ("2r", "max"):
-        raise ConfigError(f"HoD normalization must be '2r' or 'max', got {normalization!r}")
-    if fast_method not in ("subsample", "pairs"):
-        raise ConfigError(f"HoD fast_method must be 'subsample' or 'pairs', got {fast_method!r}")
-    if int(n_max) < MIN_SUPPORT:
-        raise ConfigError(f"HoD n_max must be ≥ {MIN_SUPPORT}, got {n_max}")
-    if int(n_pairs) < 1:
-        raise ConfigError(f"HoD n_pairs must be ≥ 1, got {n_pairs}")
-    P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    kp = np.ascontiguousarray(keypoint_idx, dtype=np.int64).reshape(-1)
-    if not np.isfinite(P).all():
-        raise InputError("HoD input contains NaN/inf points")
-    if not (np.isfinite(radius) and radius > 0):
-        raise InputError(f"HoD radius must be positive and finite, got {radius}")
-    if kp.size and (kp.min() < 0 or kp.max() >= P.shape[0]):
-        raise InputError("keypoint index out of range")
-    return P, kp
-
-
-def hod_histograms(
-    points: np.ndarray,
-    keypoint_idx: np.ndarray,
-    *,
-    radius: float,
-    fine: bool = True,
-    mode: str = "exact",
-    normalization: str = "2r",
-    n_max: int = 400,
-    n_pairs: int = 2000,
-    fast_method: str = "subsample",
-    seed: int = 0,
-    **unknown: object,
-) -> np.ndarray:
-    """HoD (``fine=True``, 240 values) or HoD-S (``fine=False``, 40 values) histograms.
-
-    See the module docstring for the definition, the modes and the options. Returns ``(K, D)``
-    float32 pmfs (each 40/200 block sums to 1), NaN rows for invalid keypoints.
+    A centre becomes an anchor when no earlier anchor lies within ``spacing``; every centre is
+    therefore within ``spacing`` of an anchor. Depends on distances and indices only (rigid-
+    motion invariant).
     """
-    P, kp = _validate(
-        points, keypoint_idx, radius, mode, normalization, fast_method, n_max, n_pairs, unknown
-    )
-    nc = HOD_COARSE_BINS
-    nf = HOD_FINE_BINS if fine else 0
-    K = kp.size
-    if K == 0:
-        return np.zeros((0, nc + nf), dtype=np.float32)
-    r = float(radius)
-    norm = 2.0 * r
-    centres = np.ascontiguousarray(P[kp])
-    if mode == "fast" and fast_method == "pairs":
-        if normalization == "max":
-            raise ConfigError("HoD fast_method='pairs' supports normalization='2r' only")
-        out, _ = _hod_pairs(P, kp, r, norm, nc, nf, int(n_pairs), int(seed), MIN_SUPPORT)
-        return out
-    if mode == "exact":
-        cloud = P
-        in_cloud = np.ones(K, dtype=bool)
-    else:  # fast, subsample
-        sizes = _support_sizes(P, centres, r)
-        med = float(np.median(sizes))
-        f = min(1.0, float(n_max) / med) if med > 0 else 1.0
-        if f >= 1.0:
-            cloud, in_cloud = P, np.ones(K, dtype=bool)
-        else:
-            rng = np.random.default_rng(seed)
-            keep = rng.random(P.shape[0]) < f
-            cloud = np.ascontiguousarray(P[keep])
-            in_cloud = keep[kp]
-            log.debug("HoD fast: keep fraction %.3f (median support %.0f)", f, med)
-    if normalization == "max":
-        out = np.full((K, nc + nf), np.nan, dtype=np.float32)
-        sizes_k = _hod_brute(
-            cloud, centres, in_cloud, np.arange(K), r, True, nc, nf, MIN_SUPPORT, out
-        )
-        small = np.flatnonzero(sizes_k < MIN_SUPPORT) if cloud is not P else np.zeros(0, int)
-        if small.size:
-            _hod_brute(P, centres, np.ones(K, dtype=bool), small, r, True, nc, nf, MIN_SUPPORT, out)
-        return out
-    order = visit_order(centres)
-    out, sizes_k, ops = _hod_incremental(
-        cloud, centres, in_cloud, order, r, norm, nc, nf, MIN_SUPPORT
-    )
-    log.debug("HoD %s: %d keypoints, %d pair updates", mode, K, ops)
-    if cloud is not P:
-        small = np.flatnonzero(sizes_k < MIN_SUPPORT)
-        if small.size:
-            _hod_brute(P, centres, np.ones(K, dtype=bool), small, r, False, nc, nf, MIN_SUPPORT, out)
-    return out
+    K = C.shape[0]
+    lo, h, dims, start, sidx, spts = _grid_build(C, spacing)
+    acc = np.zeros(K, dtype=np.bool_)
+    bi = np.empty(max(K, 1), dtype=np.int64)
+    bd = np.empty(max(K, 1))
+    for k in range(K):
+        m = _grid_query(spts, lo, h, dims, start, sidx, C[k], spacing, bi, bd)
+        ok = True
+        for t in range(m):
+            if acc[bi[t]]:
+                ok = False
+                break
+        acc[k] = ok
+    return np.flatnonzero(acc)
 
 
 @njit(cache=True)
@@ -584,12 +408,148 @@ def _support_sizes_kernel(P: np.ndarray, centres: np.ndarray, radius: float) -> 
     return out
 
 
-def _support_sizes(P: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
-    """Number of points within ``radius`` of each centre (for the fast-mode keep fraction)."""
-    # a subsample of centres is enough for the median
-    if centres.shape[0] > 256:
-        centres = centres[np.linspace(0, centres.shape[0] - 1, 256).astype(np.int64)]
-    return _support_sizes_kernel(P, np.ascontiguousarray(centres), radius)
+def _validate(
+    points: np.ndarray,
+    keypoint_idx: np.ndarray,
+    radius: float,
+    mode: str,
+    normalization: str,
+    fast_method: str,
+    n_max: int,
+    anchor_spacing: float,
+    n_anchors: int,
+    unknown: dict[str, object],
+) -> tuple[np.ndarray, np.ndarray]:
+    if unknown:
+        raise ConfigError(f"unknown HoD option(s) {sorted(unknown)}; valid: {', '.join(_OPTIONS)}")
+    if mode not in ("exact", "fast"):
+        raise ConfigError(f"HoD mode must be 'exact' or 'fast', got {mode!r}")
+    if normalization not in ("2r", "max"):
+        raise ConfigError(f"HoD normalization must be '2r' or 'max', got {normalization!r}")
+    if fast_method not in ("anchors", "subsample"):
+        raise ConfigError(f"HoD fast_method must be 'anchors' or 'subsample', got {fast_method!r}")
+    if int(n_max) < MIN_SUPPORT:
+        raise ConfigError(f"HoD n_max must be ≥ {MIN_SUPPORT}, got {n_max}")
+    if not (np.isfinite(anchor_spacing) and anchor_spacing > 0):
+        raise ConfigError(f"HoD anchor_spacing must be positive, got {anchor_spacing}")
+    if int(n_anchors) < 1:
+        raise ConfigError(f"HoD n_anchors must be ≥ 1, got {n_anchors}")
+    P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    kp = np.ascontiguousarray(keypoint_idx, dtype=np.int64).reshape(-1)
+    if not np.isfinite(P).all():
+        raise InputError("HoD input contains NaN/inf points")
+    if not (np.isfinite(radius) and radius > 0):
+        raise InputError(f"HoD radius must be positive and finite, got {radius}")
+    if kp.size and (kp.min() < 0 or kp.max() >= P.shape[0]):
+        raise InputError("keypoint index out of range")
+    return P, kp
+
+
+def _exact(
+    cloud: np.ndarray,
+    centres: np.ndarray,
+    in_cloud: np.ndarray,
+    r: float,
+    use_max: bool,
+    nc: int,
+    nf: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact histograms of ``(cloud ∩ ball(centre, r)) ∪ {centre}``: ``(pmf, support sizes)``."""
+    K = centres.shape[0]
+    if use_max:
+        out = np.full((K, nc + nf), np.nan, dtype=np.float32)
+        sizes = _hod_brute(
+            cloud, centres, in_cloud, np.arange(K), r, True, nc, nf, MIN_SUPPORT, out
+        )
+        return out, sizes
+    out, sizes, ops = _hod_incremental(
+        cloud, centres, in_cloud, visit_order(centres), r, 2.0 * r, nc, nf, MIN_SUPPORT
+    )
+    log.debug("HoD: %d centres, %d pair updates", K, ops)
+    return out, sizes
+
+
+def hod_histograms(
+    points: np.ndarray,
+    keypoint_idx: np.ndarray,
+    *,
+    radius: float,
+    fine: bool = True,
+    mode: str = "exact",
+    normalization: str = "2r",
+    fast_method: str = "anchors",
+    anchor_spacing: float = 0.1,
+    n_anchors: int = 4,
+    n_max: int = 400,
+    seed: int = 0,
+    **unknown: object,
+) -> np.ndarray:
+    """HoD (``fine=True``, 240 values) or HoD-S (``fine=False``, 40 values) histograms.
+
+    See the module docstring for the definition, the modes and the options. Returns ``(K, D)``
+    float32 pmfs (each 40/200 block sums to 1), NaN rows for invalid keypoints.
+    """
+    P, kp = _validate(
+        points,
+        keypoint_idx,
+        radius,
+        mode,
+        normalization,
+        fast_method,
+        n_max,
+        anchor_spacing,
+        n_anchors,
+        unknown,
+    )
+    nc = HOD_COARSE_BINS
+    nf = HOD_FINE_BINS if fine else 0
+    K = kp.size
+    if K == 0:
+        return np.zeros((0, nc + nf), dtype=np.float32)
+    r = float(radius)
+    use_max = normalization == "max"
+    centres = np.ascontiguousarray(P[kp])
+    all_in = np.ones(K, dtype=bool)
+    if mode == "exact":
+        return _exact(P, centres, all_in, r, use_max, nc, nf)[0]
+
+    if fast_method == "anchors":
+        A = _poisson_anchors(centres, float(anchor_spacing) * r)
+        AC = np.ascontiguousarray(centres[A])
+        H, _ = _exact(P, AC, np.ones(A.size, dtype=bool), r, use_max, nc, nf)
+        sizes = _support_sizes_kernel(P, centres, r)
+        k = min(int(n_anchors), A.size)
+        d, nn = cKDTree(AC).query(centres, k=k)
+        d = d.reshape(K, k)
+        nn = nn.reshape(K, k)
+        okA = ~np.isnan(H[:, 0])
+        w = okA[nn] / np.maximum(d, 1e-9 * r) ** 2
+        wsum = w.sum(axis=1)
+        Hz = np.where(okA[:, None], H, 0.0).astype(np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = (np.einsum("kj,kjd->kd", w, Hz[nn]) / wsum[:, None]).astype(np.float32)
+        out[sizes < MIN_SUPPORT] = np.nan
+        lost = np.flatnonzero((sizes >= MIN_SUPPORT) & ~(wsum > 0))
+        log.debug("HoD fast: %d anchors for %d keypoints, %d fallbacks", A.size, K, lost.size)
+        if lost.size:
+            _hod_brute(P, centres, all_in, lost, r, use_max, nc, nf, MIN_SUPPORT, out)
+        return out
+
+    # fast, subsample
+    sample = centres
+    if K > 256:
+        sample = centres[np.linspace(0, K - 1, 256).astype(np.int64)]
+    med = float(np.median(_support_sizes_kernel(P, np.ascontiguousarray(sample), r)))
+    f = min(1.0, float(n_max) / med) if med > 0 else 1.0
+    if f >= 1.0:
+        return _exact(P, centres, all_in, r, use_max, nc, nf)[0]
+    keep = np.random.default_rng(seed).random(P.shape[0]) < f
+    log.debug("HoD fast: keep fraction %.3f (median support %.0f)", f, med)
+    out, sizes = _exact(np.ascontiguousarray(P[keep]), centres, keep[kp], r, use_max, nc, nf)
+    small = np.flatnonzero(sizes < MIN_SUPPORT)
+    if small.size:
+        _hod_brute(P, centres, all_in, small, r, use_max, nc, nf, MIN_SUPPORT, out)
+    return out
 
 
 @register_descriptor(
@@ -610,8 +570,9 @@ def hod(
     """HoD descriptors: ``[coarse pmf (40) | fine pmf (200)]``, ``(K, 240)`` float32.
 
     ``normals`` is ignored. Options: ``mode`` ("exact" | "fast"), ``normalization``
-    ("2r" | "max"), ``fast_method`` ("subsample" | "pairs"), ``n_max`` (400), ``n_pairs``
-    (2000), ``seed`` (0); see the module docstring.
+    ("2r" | "max"), ``fast_method`` ("anchors" | "subsample"), ``anchor_spacing`` (0.1, in
+    units of ``radius``), ``n_anchors`` (4), ``n_max`` (400), ``seed`` (0, subsample only);
+    see the module docstring.
     """
     return hod_histograms(points, keypoint_idx, radius=radius, fine=True, **options)
 

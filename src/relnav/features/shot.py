@@ -63,7 +63,9 @@ def _spec_permutation() -> np.ndarray:
             for s in range(2):
                 vol_spec = (a * 2 + e) * 2 + s
                 vol_pcl = (a * 2 + s) * 2 + e
-                perm[vol_spec * nb : (vol_spec + 1) * nb] = np.arange(vol_pcl * nb, (vol_pcl + 1) * nb)
+                perm[vol_spec * nb : (vol_spec + 1) * nb] = np.arange(
+                    vol_pcl * nb, (vol_pcl + 1) * nb
+                )
     return perm
 
 
@@ -90,8 +92,15 @@ def _volume_pcl(x: float, y: float, z: float, dist: float, r_half: float) -> tup
 
 @njit(cache=True)
 def _accumulate_pcl(
-    hist: np.ndarray, desc: int, sel: int, bin_pos: float, x: float, y: float, z: float,
-    dist: float, radius: float,
+    hist: np.ndarray,
+    desc: int,
+    sel: int,
+    bin_pos: float,
+    x: float,
+    y: float,
+    z: float,
+    dist: float,
+    radius: float,
 ) -> None:
     """PCL ``interpolateSingleChannel`` for one neighbour (additive interpolation)."""
     nb = NR_SHAPE_BINS
@@ -155,8 +164,15 @@ def _accumulate_pcl(
 
 @njit(cache=True)
 def _accumulate_product(
-    hist: np.ndarray, desc: int, sel: int, bin_pos: float, x: float, y: float, z: float,
-    dist: float, radius: float,
+    hist: np.ndarray,
+    desc: int,
+    sel: int,
+    bin_pos: float,
+    x: float,
+    y: float,
+    z: float,
+    dist: float,
+    radius: float,
 ) -> None:
     """Quadrilinear interpolation of the SHOT paper: unit mass, products of ``1 − d``."""
     nb = NR_SHAPE_BINS
@@ -347,9 +363,7 @@ def shot(
         raise InputError(f"normals must have shape {P.shape}, got {Nrm.shape}")
     if kp.size == 0:
         return np.zeros((0, SHOT_DIM), dtype=np.float32)
-    out = _shot_kernel(
-        P, Nrm, kp, float(radius), lr, interp == "product", SHOT_MIN_NEIGHBORS
-    )
+    out = _shot_kernel(P, Nrm, kp, float(radius), lr, interp == "product", SHOT_MIN_NEIGHBORS)
     if layout == "spec":
         out = np.ascontiguousarray(out[:, _SPEC_FROM_PCL])
     n_bad = int(np.isnan(out[:, 0]).sum())

@@ -27,14 +27,15 @@ Algorithm (paper 2 §2.2.2 steps 1–5 with the readings of ALGORITHMS §G.2; ev
    pairs are used.
 
    The very first samples have nothing to be checked against (any point of the shell passes), so
-   **[interpretation: paper 2 is silent]** the correspondence of a *seed pair* of well separated
-   early samples (``p_a, p_b``, largest ``ρ_a ρ_b sin∠``) is searched exhaustively: every pair of
+   **[interpretation: paper 2 is silent]** the correspondence of *seed pairs* of well separated
+   early samples (``n_seed_pairs`` = 6 pairs among the first 12 FPS samples with the largest
+   ``ρ_a ρ_b sin∠``, ``sin∠ > 0.3``) is searched exhaustively: every pair of
    shell candidates ``(q_a, q_b)`` passing the d⁴ test (on a ``τ``-voxel subsample of the camera
    cloud) gives a rotation hypothesis (TRIAD of the triangles ``(0, p_a, p_b)``,
    ``(0, q_a, q_b)``); hypotheses are scored by how many of the next ``n_score`` FPS samples land
    within ``3τ`` of a camera point, the best ``n_refine`` are rescored on ``4·n_score`` samples.
    The best hypothesis only *gates* the search: candidates for ``p_l`` are taken within
-   ``gate_factor·τ`` (3τ) of its predicted position, then the d⁴ check above decides.
+   ``gate_factor·τ`` (1.5τ) of its predicted position, then the d⁴ check above decides.
    ``max_rotation_deg`` (with ``init``'s rotation, identity by default) restricts the hypotheses
    when the sensors' relative attitude is roughly known; ``init`` alone skips the search.
 5. **Feature sphere.** A sample is retained when at least 4 candidates pass; the 4 are chosen
@@ -318,12 +319,12 @@ class CrossSourceRegistration:
         cos_tol: float = 0.1,
         area_tol: float = 0.1,
         n_check: int = 3,
-        gate_factor: float = 3.0,
+        gate_factor: float = 1.5,
         coplanar: Coplanar = "tolerance",
         eta: float = 1e-3,
         max_centre_factor: float = 2.0,
         max_samples: int | None = None,
-        n_seed_pairs: int = 3,
+        n_seed_pairs: int = 6,
         n_score: int = 12,
         n_refine: int = 10,
         max_candidates: int = 400,
@@ -579,7 +580,7 @@ class CrossSourceRegistration:
         Qv = Q0[np.sort(first)]
         rho_q = np.linalg.norm(Qv, axis=1)
         rho_s = np.linalg.norm(S, axis=1)
-        k = min(8, S.shape[0])
+        k = min(12, S.shape[0])
         pairs = []
         for a in range(k):
             for b in range(a + 1, k):

@@ -170,7 +170,9 @@ def axis_permutation(spec: str | np.ndarray | None) -> np.ndarray:
                 sign = -1.0 if s[i] == "-" else 1.0
                 i += 1
             if i >= len(s) or s[i] not in _AXES:
-                raise ConfigError(f"bad LVLH axis spec {spec!r}: expected e.g. 'x,y,z' or '-z,x,-y'")
+                raise ConfigError(
+                    f"bad LVLH axis spec {spec!r}: expected e.g. 'x,y,z' or '-z,x,-y'"
+                )
             toks.append((sign, s[i]))
             i += 1
         if len(toks) != 3 or len({t[1] for t in toks}) != 3:

@@ -70,11 +70,12 @@ from relnav.fusion.dynamics import ClohessyWiltshire, TranslationModel
 from relnav.geometry.dualquat import (
     _qmul,
     cayley,
-    cayley_inverse,
-    cayley_mean,
     dq_conjugate,
     dq_from_rt,
     dq_multiply,
+    quat_cayley,
+    quat_cayley_inverse,
+    quat_cayley_mean,
 )
 from relnav.geometry.rotations import quat_to_matrix
 
@@ -103,7 +104,9 @@ def _positive_fields(obj: Any) -> None:
     for f in fields(obj):
         v = getattr(obj, f.name)
         if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0.0):
-            raise ConfigError(f"{type(obj).__name__}.{f.name} must be a finite number >= 0, got {v!r}")
+            raise ConfigError(
+                f"{type(obj).__name__}.{f.name} must be a finite number >= 0, got {v!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -179,7 +182,9 @@ def _coerce(cls: type, value: Any, name: str) -> Any:
         return cls(**{k: float(v) for k, v in value.items()})
     if isinstance(value, int | float) and cls is MeasurementNoise:
         raise ConfigError(f"{name}: give a MeasurementNoise, a dict or a (6, 6) matrix")
-    raise ConfigError(f"{name}: expected {cls.__name__}, a dict or None, got {type(value).__name__}")
+    raise ConfigError(
+        f"{name}: expected {cls.__name__}, a dict or None, got {type(value).__name__}"
+    )
 
 
 @dataclass(frozen=True)
@@ -205,7 +210,10 @@ class UpdateInfo:
 
 
 def quat_delta(omega: np.ndarray, dt: float) -> np.ndarray:
-    """``q_Δ = [ω/|ω| sin(½|ω|Δt), cos(½|ω|Δt)]`` (xyzw, Paper 2 eq. 31) for rate(s) ``(..., 3)``."""
+    """``q_Δ = [ω/|ω| sin(½|ω|Δt), cos(½|ω|Δt)]`` (xyzw, Paper 2 eq. 31) of rate(s) ``(..., 3)``.
+
+    Body rates in rad/s, ``dt`` in s; exact for a constant rate over the step.
+    """
     th = np.asarray(omega, dtype=np.float64) * float(dt)
     a = np.linalg.norm(th, axis=-1, keepdims=True)
     half = 0.5 * a
@@ -336,9 +344,7 @@ class PoseFilter:
         """Physical process variances ``(12,)`` ``[d, v, θ, ω]`` for a step of ``dt`` s."""
         qn = self.q_noise
         s = abs(dt) / self.dt
-        return s * np.repeat(
-            np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3
-        )
+        return s * np.repeat(np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3)
 
     # --- state ------------------------------------------------------------------------------
 
@@ -431,9 +437,7 @@ class PoseFilter:
         s = np.sqrt(np.clip(np.diag(self.physical_covariance()), 0.0, None))
         return {"position": s[:3], "velocity": s[3:6], "attitude": s[6:9], "omega": s[9:12]}
 
-    def error_vector(
-        self, position: Any, velocity: Any, quat_xyzw: Any, omega: Any
-    ) -> np.ndarray:
+    def error_vector(self, position: Any, velocity: Any, quat_xyzw: Any, omega: Any) -> np.ndarray:
         """True minus estimated state ``(12,)`` ``[δd, δv, δθ, δω]`` (``δθ``: body rotation
         vector of ``q⁻¹ ⊗ q_true``)."""
         p = _check_vec(position, 3, "position")
@@ -523,7 +527,9 @@ class PoseFilter:
     def _predict(self, dt: float) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _update(self, p: np.ndarray, q: np.ndarray, R: np.ndarray) -> UpdateInfo:  # pragma: no cover
+    def _update(
+        self, p: np.ndarray, q: np.ndarray, R: np.ndarray
+    ) -> UpdateInfo:  # pragma: no cover
         raise NotImplementedError
 
     def settings(self) -> dict[str, Any]:
@@ -640,9 +646,13 @@ class TwistorUKF(PoseFilter):
         self.Wm[0] = self.lam / c
         self.Wc[0] = self.lam / c + (1.0 - self.alpha**2 + self.beta)
         if innovation not in ("position+rotation", "twist"):
-            raise ConfigError(f"innovation must be 'position+rotation' or 'twist', got {innovation!r}")
+            raise ConfigError(
+                f"innovation must be 'position+rotation' or 'twist', got {innovation!r}"
+            )
         if update_sigma not in ("redraw", "propagated"):
-            raise ConfigError(f"update_sigma must be 'redraw' or 'propagated', got {update_sigma!r}")
+            raise ConfigError(
+                f"update_sigma must be 'redraw' or 'propagated', got {update_sigma!r}"
+            )
         if covariance_update not in ("standard", "joseph"):
             raise ConfigError(
                 f"covariance_update must be 'standard' or 'joseph', got {covariance_update!r}"
@@ -702,11 +712,14 @@ class TwistorUKF(PoseFilter):
     def _apply_sigma(
         self, chi: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Nominal states of error sigma points: ``d, v, q (xyzw), ω`` per point."""
+        """Nominal states of error sigma points: ``d, v, q (xyzw), ω`` per point.
+
+        ``q̂ⁱ = q̂ ⊗ cayley⁻¹(Bⁱ)`` (eq. 34); only its rotation is kept, the translation being
+        ``dⁱ = d + δdⁱ`` (pose rebuild, module docstring).
+        """
         d = self._d + chi[:, 0:3]
         v = self._v + chi[:, 3:6]
-        qh = dq_multiply(self._pose_dq(), cayley_inverse(chi[:, 6:12]))
-        q = _canon_q(qh[:, :4])
+        q = _canon_q(_qmul(self._q, quat_cayley_inverse(chi[:, 6:9])))
         w = self._w + chi[:, 12:15]
         return d, v, q, w
 
@@ -717,21 +730,20 @@ class TwistorUKF(PoseFilter):
         d, v, q, w = self._apply_sigma(chi)
         # propagate: attitude by body rates (right multiplication), translation by CW
         q = _canon_q(_qmul(q, quat_delta(w, dt)))
-        d, v = self.dynamics.propagate(d, v, dt)
-        qh = dq_from_rt(q, d)  # rebuild the dual part from (q, d)
+        s = np.concatenate([d, v], axis=1) @ self.dynamics.stm(dt).T
+        d, v = s[:, :3], s[:, 3:]
         d_m = self.Wm @ d
         v_m = self.Wm @ v
         w_m = self.Wm @ w
-        mean_dq, it, ok = cayley_mean(qh, self.Wm, init=qh[0])
+        # iterative Cayley mean of the poses; its rotation part only involves the rotations
+        q_m, it, ok = quat_cayley_mean(q, self.Wm, init=q[0])
         self.mean_iterations = it
         if not ok:
             log.debug("Cayley mean not converged after %d iterations", it)
-        q_m = _canon_q(mean_dq[:4])
-        mean_dq = dq_from_rt(q_m, d_m)
         dX = np.empty_like(chi)
         dX[:, 0:3] = d - d_m
         dX[:, 3:6] = v - v_m
-        dX[:, 6:12] = cayley(dq_multiply(dq_conjugate(mean_dq), qh))
+        dX[:, 6:12] = cayley(dq_multiply(dq_conjugate(dq_from_rt(q_m, d_m)), dq_from_rt(q, d)))
         dX[:, 12:15] = w - w_m
         P = (dX * self.Wc[:, None]).T @ dX
         P += self._native_from_phys_var(self._phys_process_var(dt))
@@ -755,28 +767,27 @@ class TwistorUKF(PoseFilter):
         J[3:6, 0:3] = 0.25 * Rbs
         return _sym(J @ R @ J.T)
 
-    def _meas_of(self, d: np.ndarray, q: np.ndarray, mean_dq_inv: np.ndarray) -> np.ndarray:
+    def _meas_of(self, d: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Measurement coordinates of poses ``(d, q)`` relative to the predicted pose."""
-        B = cayley(dq_multiply(mean_dq_inv, dq_from_rt(q, d)))
         if self.innovation == "position+rotation":
-            return np.concatenate([d, B[..., 0:3]], axis=-1)
-        return B
+            conj = self._q * np.array([-1.0, -1.0, -1.0, 1.0])
+            return np.concatenate([d, quat_cayley(_qmul(conj, q))], axis=-1)
+        return cayley(dq_multiply(dq_conjugate(self._pose_dq()), dq_from_rt(q, d)))
 
     def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
-        mean_inv = dq_conjugate(self._pose_dq())
         if self.update_sigma == "propagated" and self._prop is not None:
             dX = self._prop["dX"]
             d_i, q_i = self._prop["d"], self._prop["q"]
         else:
             dX = self.sigma_points()
             d_i, _, q_i, _ = self._apply_sigma(dX)
-        Z = self._meas_of(d_i, q_i, mean_inv)
+        Z = self._meas_of(d_i, q_i)
         z_hat = self.Wm @ Z
         dZ = Z - z_hat
         Rz = self._meas_cov(R)
         Pzz = _sym((dZ * self.Wc[:, None]).T @ dZ + Rz)
         Pxz = (dX * self.Wc[:, None]).T @ dZ
-        z = self._meas_of(p, q_meas, mean_inv)
+        z = self._meas_of(p, q_meas)
         nu = z - z_hat
         nis = float(nu @ np.linalg.solve(Pzz, nu))
         reason = self._gate(nis, nu.size)
@@ -793,8 +804,8 @@ class TwistorUKF(PoseFilter):
             P = IKH @ P_prior @ IKH.T + K @ Rz @ K.T
         self._d = self._d + dx[0:3]
         self._v = self._v + dx[3:6]
-        qh = dq_multiply(self._pose_dq(), cayley_inverse(dx[6:12]))
-        self._q = _canon_q(qh[:4])
+        # q̂ ← q̂ ⊗ cayley⁻¹(δB); its translation is then rebuilt from the updated d
+        self._q = _canon_q(_qmul(self._q, quat_cayley_inverse(dx[6:9])))
         self._w = self._w + dx[12:15]
         self._P = _sym(P)
         self._prop = None

@@ -41,6 +41,9 @@ __all__ = [
     "dq_to_matrix",
     "dq_to_rt",
     "dq_transform_points",
+    "quat_cayley",
+    "quat_cayley_inverse",
+    "quat_cayley_mean",
     "quat_conjugate",
     "quat_inverse",
 ]
@@ -150,7 +153,7 @@ def dq_from_rt(quat_xyzw: np.ndarray, t: np.ndarray) -> np.ndarray:
     if q.shape[-1:] != (4,) or t.shape[-1:] != (3,):
         raise InputError(f"expected quaternion (..., 4) and translation (..., 3), got {q.shape}")
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    tq = np.concatenate([t, np.zeros(t.shape[:-1] + (1,))], axis=-1)
+    tq = np.concatenate([t, np.zeros((*t.shape[:-1], 1))], axis=-1)
     qd = 0.5 * _qmul(tq, q)
     q, qd = np.broadcast_arrays(q, qd)
     return np.concatenate([q, qd], axis=-1)
@@ -176,7 +179,7 @@ def dq_from_matrix(T: np.ndarray) -> np.ndarray:
 def dq_to_matrix(a: np.ndarray) -> np.ndarray:
     """Rigid transform(s) ``(..., 4, 4)`` of unit dual quaternion(s)."""
     q, t = dq_to_rt(a)
-    T = np.zeros(q.shape[:-1] + (4, 4))
+    T = np.zeros((*q.shape[:-1], 4, 4))
     T[..., :3, :3] = quat_to_matrix(q)
     T[..., :3, 3] = t
     T[..., 3, 3] = 1.0
@@ -193,7 +196,7 @@ def _pure(v6: np.ndarray) -> np.ndarray:
     v6 = np.asarray(v6, dtype=np.float64)
     if v6.shape[-1:] != (6,):
         raise InputError(f"twist must have shape (..., 6), got {v6.shape}")
-    z = np.zeros(v6.shape[:-1] + (1,))
+    z = np.zeros((*v6.shape[:-1], 1))
     return np.concatenate([v6[..., :3], z, v6[..., 3:], z], axis=-1)
 
 
@@ -237,7 +240,7 @@ def cayley(
         qp1[..., 3] += 1.0
         inv_qp1 = quat_inverse(qp1)
         br = q[..., :3] / qp1[..., 3:4]
-        one_m_br = np.concatenate([-br, np.ones(br.shape[:-1] + (1,))], axis=-1)
+        one_m_br = np.concatenate([-br, np.ones((*br.shape[:-1], 1))], axis=-1)
         bd = _qmul(_qmul(one_m_br, a[..., 4:]), inv_qp1)[..., :3]
     return np.concatenate([br, bd], axis=-1)
 
@@ -257,7 +260,7 @@ def cayley_inverse(B: np.ndarray, *, general: bool = False) -> np.ndarray:
     n2 = np.sum(br * br, axis=-1, keepdims=True)
     den = 1.0 + n2
     q = np.concatenate([2.0 * br[..., :3], 1.0 - n2], axis=-1) / den
-    inv_1mb = np.concatenate([br[..., :3], np.ones(br.shape[:-1] + (1,))], axis=-1) / den
+    inv_1mb = np.concatenate([br[..., :3], np.ones((*br.shape[:-1], 1))], axis=-1) / den
     qp1 = q.copy()
     qp1[..., 3] += 1.0
     qd = _qmul(_qmul(qp1, Bq[..., 4:]), inv_1mb)
@@ -315,3 +318,53 @@ def cayley_mean(
         if float(np.linalg.norm(Bbar)) < tol:
             return dq_canonical(mean), it, True
     return dq_canonical(mean), max_iter, False
+
+
+# --- rotation-only (real part) versions: the real part of a dual-quaternion product depends only
+# on the real parts, so these equal the real halves of cayley / cayley_inverse / cayley_mean.
+
+
+def quat_cayley(q: np.ndarray) -> np.ndarray:
+    """Real half ``B_r = (q − 1)(q + 1)⁻¹ = v / (1 + w)`` of the Cayley transform of unit
+    quaternion(s) ``(..., 4)`` xyzw, after mapping to ``w ≥ 0`` (= modified Rodrigues
+    parameters ``tan(φ/4) u``)."""
+    q = np.asarray(q, dtype=np.float64)
+    s = np.where(q[..., 3:4] < 0.0, -1.0, 1.0)
+    return s * q[..., :3] / (1.0 + s * q[..., 3:4])
+
+
+def quat_cayley_inverse(b: np.ndarray) -> np.ndarray:
+    """Unit quaternion(s) ``(1 + b)(1 − b)⁻¹ = [2b, 1 − |b|²] / (1 + |b|²)`` of ``(..., 3)``."""
+    b = np.asarray(b, dtype=np.float64)
+    n2 = np.sum(b * b, axis=-1, keepdims=True)
+    return np.concatenate([2.0 * b, 1.0 - n2], axis=-1) / (1.0 + n2)
+
+
+def quat_cayley_mean(
+    quats: np.ndarray,
+    weights: np.ndarray | None = None,
+    *,
+    init: np.ndarray | None = None,
+    tol: float = 1e-10,
+    max_iter: int = 10,
+) -> tuple[np.ndarray, int, bool]:
+    """Rotation part of :func:`cayley_mean`: weighted mean of unit quaternions ``(M, 4)``.
+
+    Returns ``(mean (4,) with w ≥ 0, n_iter, converged)``.
+    """
+    X = np.asarray(quats, dtype=np.float64).reshape(-1, 4)
+    m = X.shape[0]
+    if m == 0:
+        raise InputError("quat_cayley_mean needs at least one quaternion")
+    w = np.full(m, 1.0 / m) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != (m,):
+        raise InputError(f"weights must have shape ({m},), got {w.shape}")
+    mean = np.asarray(X[0] if init is None else init, dtype=np.float64).reshape(4)
+    mean = mean / np.linalg.norm(mean)
+    for it in range(1, max_iter + 1):
+        bbar = w @ quat_cayley(_qmul(quat_conjugate(mean), X))
+        mean = _qmul(mean, quat_cayley_inverse(bbar))
+        mean = mean / np.linalg.norm(mean)
+        if float(np.linalg.norm(bbar)) < tol:
+            return (-mean if mean[3] < 0 else mean), it, True
+    return (-mean if mean[3] < 0 else mean), max_iter, False

@@ -79,6 +79,7 @@ __all__ = [
     "Open3DICP",
     "SmallGICPRegistration",
     "require",
+    "information_degeneracy",
     "twist_covariance_from_hessian",
 ]
 
@@ -180,6 +181,27 @@ def twist_covariance_from_hessian(H: np.ndarray, T: np.ndarray) -> np.ndarray | 
     return 0.5 * (C + C.T)
 
 
+def information_degeneracy(A: np.ndarray, centre: np.ndarray, radius: float) -> float:
+    """``λmin/λmax`` of an information matrix re-expressed about ``centre``, rotation × radius.
+
+    ``A`` (6×6) is the information of a twist ``[ρ, φ]`` about the frame origin. A cloud far
+    from its frame origin (a target 20 m or 20 km ahead of the sensor) couples rotation and
+    translation through the lever arm, so ``A`` is first moved to the cloud centre
+    (``Ad_Cᵀ A Ad_C``, ``C`` the translation to ``centre``) and the rotation block scaled by the
+    cloud radius (m); the ratio is then scale-free and ~0 only for real degeneracies (e.g. a
+    single plane under point-to-plane). Returns 0 for non-finite input.
+    """
+    Ad = np.eye(6)
+    Ad[:3, 3:] = hat(np.asarray(centre, dtype=np.float64))
+    Ac = Ad.T @ A @ Ad
+    scale = np.r_[np.ones(3), np.full(3, 1.0 / max(radius, 1e-12))]
+    As = Ac * scale[:, None] * scale[None, :]
+    if not np.isfinite(As).all():
+        return 0.0
+    ev = np.linalg.eigvalsh(0.5 * (As + As.T))
+    return float(max(ev[0], 0.0) / ev[-1]) if ev[-1] > 0 else 0.0
+
+
 def _information(
     moved: np.ndarray, normals: np.ndarray | None, radius: float
 ) -> tuple[np.ndarray, float]:
@@ -195,13 +217,7 @@ def _information(
     else:
         J = np.hstack([normals, np.cross(moved, normals)])
         A = J.T @ J
-    scale = np.r_[np.ones(3), np.full(3, 1.0 / max(radius, 1e-12))]
-    As = A * scale[:, None] * scale[None, :]
-    if not np.isfinite(As).all():
-        return A, 0.0
-    ev = np.linalg.eigvalsh(0.5 * (As + As.T))
-    ratio = float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
-    return A, max(ratio, 0.0)
+    return A, information_degeneracy(A, moved.mean(axis=0), radius)
 
 
 @dataclass
@@ -1195,12 +1211,13 @@ class SmallGICPRegistration(_ExternalBase):
             covariance=cov,
             compute_covariance=False,
         )
-        # degeneracy indicator from small_gicp's own Hessian (rotation scaled by the radius)
-        scale = np.r_[np.full(3, 1.0 / max(src.radius, 1e-12)), np.ones(3)]
-        Hs = H * scale[:, None] * scale[None, :]
-        if np.isfinite(Hs).all() and n_in > 0:
-            ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
-            ratio = float(max(ev[0], 0.0) / ev[-1]) if ev[-1] > 0 else 0.0
+        # degeneracy indicator from small_gicp's own Hessian: right perturbation [φ, ρ] in the
+        # source frame → [ρ, φ], about the source centroid
+        perm = np.r_[3:6, 0:3]
+        if np.isfinite(H).all() and n_in > 0:
+            ratio = information_degeneracy(
+                H[np.ix_(perm, perm)], src.points.mean(axis=0), src.radius
+            )
             result.info["degeneracy_ratio"] = ratio
             if result.status == "ok" and ratio < self.degeneracy_ratio:
                 result.status = "degenerate"

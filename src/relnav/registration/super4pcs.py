@@ -428,21 +428,31 @@ class Super4PCS:
     def _select_base(
         P: np.ndarray, D: np.ndarray, max_diam: float, rng: np.random.Generator
     ) -> tuple[int, int, int, int] | None:
-        """A wide, nearly planar base ``(p1, p2, p3, p4)`` whose segments p1p2 and p3p4 cross."""
+        """A wide, nearly planar base ``(p1, p2, p3, p4)`` whose segments p1p2 and p3p4 cross.
+
+        As Super4PCS: a random first point, the widest triangle of ``1000`` random pairs with
+        it (edges ``≤ max_diam``), then the fourth point closest to the triangle's plane.
+        """
         n = P.shape[0]
         if n < 4:
             return None
-        tri = rng.integers(0, n, size=(_TRIANGLE_TRIALS, 3))
-        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-        distinct = (a != b) & (b != c) & (a != c)
-        dmax = np.maximum(np.maximum(D[a, b], D[a, c]), D[b, c])
-        area = 0.5 * np.linalg.norm(np.cross(P[b] - P[a], P[c] - P[a]), axis=1)
-        valid = distinct & (dmax <= max_diam) & (area > 0)
-        if not valid.any():
-            return None
-        order = np.argsort(-np.where(valid, area, -1.0))
-        for k in order[: min(10, int(valid.sum()))]:
-            ia, ib, ic = int(a[k]), int(b[k]), int(c[k])
+        for _attempt in range(10):
+            ia = int(rng.integers(n))  # random first point, widest triangle from it
+            bc = rng.integers(0, n, size=(_TRIANGLE_TRIALS, 2))
+            b, c = bc[:, 0], bc[:, 1]
+            area = 0.5 * np.linalg.norm(np.cross(P[b] - P[ia], P[c] - P[ia]), axis=1)
+            valid = (
+                (b != ia)
+                & (c != ia)
+                & (b != c)
+                & (D[ia, b] <= max_diam)
+                & (D[ia, c] <= max_diam)
+                & (area > 0)
+            )
+            if not valid.any():
+                continue
+            k = int(np.argmax(np.where(valid, area, -1.0)))
+            ib, ic = int(b[k]), int(c[k])
             pa, pb, pc = P[ia], P[ib], P[ic]
             nrm = np.cross(pb - pa, pc - pa)
             nrm /= np.linalg.norm(nrm)

@@ -288,6 +288,7 @@ def get_preset(
     name: str,
     *,
     frames: int | None = None,
+    max_frames: int | None = None,
     seed: int | None = None,
     target_mesh: str | None = None,
     scale_to: float | None = _UNSET,
@@ -300,7 +301,11 @@ def get_preset(
     name : str
         One of :func:`available_presets`.
     frames : int, optional
-        Frame count (default: the preset's).
+        Frame count (default: the preset's). The path and duration stay the same, so fewer
+        frames mean larger motion between frames.
+    max_frames : int, optional
+        Simulate only the first ``max_frames`` frames at the preset's own frame rate (same
+        per-frame motion as the full preset, a shorter stretch of its path).
     seed : int, optional
         Scenario seed (default 0).
     target_mesh : str, optional
@@ -330,6 +335,8 @@ def get_preset(
     d = builder(int(n), **options)
     d["name"] = str(name).lower().replace("_", "-")
     d["seed"] = 0 if seed is None else seed
+    if max_frames is not None:
+        d["max_frames"] = max_frames
     tgt = dict(d["target"])
     if target_mesh is not None:
         tgt.pop("name", None)
