@@ -257,6 +257,8 @@ def test_planar_cloud_point_to_plane_is_degenerate():
     r = get_registration("o3d-icp-plane").register(plane + np.array([0.0, 0.01, 0.0]), plane)
     assert r.status == "degenerate"
     assert "6 DoF" in r.message
+    np.testing.assert_array_equal(r.T_target_source, np.eye(4))  # the initial guess
+    assert r.info["T_estimate"].shape == (4, 4)
 
 
 def test_far_away_target_small_gicp_grid_limit():

@@ -82,7 +82,7 @@ def register_estimator(
 
 
 def _load_all() -> None:
-    from relnav.estimation import alphabeta, hinf, kalman, sdre, svd  # noqa: F401
+    from relnav.estimation import alphabeta, hinf, icp_refine, kalman, sdre, svd  # noqa: F401
 
 
 def available_estimators() -> dict[str, str]:

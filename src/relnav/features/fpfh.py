@@ -74,7 +74,8 @@ def _pair_features(
         return 0.0, 0.0, 0.0, 0.0
     a1 = (n1x * dx + n1y * dy + n1z * dz) / f4
     a2 = (n2x * dx + n2y * dy + n2z * dz) / f4
-    if np.arccos(min(abs(a1), 1.0)) > np.arccos(min(abs(a2), 1.0)):
+    # PCL: acos(|a1|) > acos(|a2|); acos is decreasing, so compare |a1| < |a2| directly
+    if abs(a1) < abs(a2):
         ux, uy, uz = n2x, n2y, n2z
         mx, my, mz = n1x, n1y, n1z
         dx, dy, dz = -dx, -dy, -dz

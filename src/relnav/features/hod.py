@@ -7,8 +7,10 @@ reconstruction of ALGORITHMS §A.1, consistent with every statement of Paper 1:
 2. All unordered pairs ``i < j`` of ``S`` (self-pairs excluded): ``d_ij = ‖q_i − q_j‖``.
 3. ``d̂ = d / (2r)`` (``normalization="2r"``, default; 2r is the largest possible pair distance)
    or ``d̂ = d / max d_ij`` (``normalization="max"``, scale-invariant).
-4. Coarse histogram: 40 equal bins on [0, 1] (``bin = floor(40·d̂)``, ``d̂ = 1`` → last bin);
-   fine histogram: 200 equal bins (``floor(200·d̂)``).
+4. Fine histogram: 200 equal bins on [0, 1], ``fine = min(floor(200·d̂), 199)`` (``d̂ = 1`` →
+   last bin); coarse histogram: 40 equal bins, ``coarse = fine // 5`` (= ``floor(40·d̂)``; the
+   nested definition keeps HoD-S identical to HoD's coarse block even at floating-point bin
+   edges, and needs one bin computation per pair).
 5. Each histogram divided by its count (``n(n−1)/2``) → probability mass function.
 6. HoD-S = coarse (40 values); HoD = [coarse, fine] (240 values; the 40/200 split is inferred
    from 240 − 40).
@@ -66,6 +68,7 @@ log = logging.getLogger(__name__)
 
 HOD_COARSE_BINS = 40
 HOD_FINE_BINS = 200
+_NF = HOD_FINE_BINS  # counts are kept at the fine resolution; coarse bin = fine bin // 5
 
 _OPTIONS = (
     "mode",
@@ -88,49 +91,38 @@ def _add_pairs(
     mz: np.ndarray,
     m0: int,
     m1: int,
-    hc: np.ndarray,
-    hf: np.ndarray,
+    h: np.ndarray,
     sign: int,
     norm: float,
-    nc: int,
-    nf: int,
-    cb: np.ndarray,
     fb: np.ndarray,
 ) -> None:
-    """Add ``sign`` × the bins of the pairs ``(a, member i)``, ``m0 ≤ i < m1``, to the counts.
+    """Add ``sign`` × the fine bins of the pairs ``(a, member i)``, ``m0 ≤ i < m1``, to ``h``.
 
     Members are stored as coordinate columns ``mx, my, mz`` (contiguous → the distance loop
-    vectorises); the bins go through the scratch arrays ``cb`` / ``fb``.
+    vectorises); the bins go through the scratch array ``fb``.
     """
-    if nf > 0:
-        for i in range(m0, m1):
-            dx = ax - mx[i]
-            dy = ay - my[i]
-            dz = az - mz[i]
-            x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
-            cb[i] = min(int(x * nc), nc - 1)
-            fb[i] = min(int(x * nf), nf - 1)
-        for i in range(m0, m1):
-            hf[fb[i]] += sign
-    else:
-        for i in range(m0, m1):
-            dx = ax - mx[i]
-            dy = ay - my[i]
-            dz = az - mz[i]
-            x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
-            cb[i] = min(int(x * nc), nc - 1)
     for i in range(m0, m1):
-        hc[cb[i]] += sign
+        dx = ax - mx[i]
+        dy = ay - my[i]
+        dz = az - mz[i]
+        x = np.sqrt(dx * dx + dy * dy + dz * dz) / norm
+        fb[i] = min(int(x * _NF), _NF - 1)
+    for i in range(m0, m1):
+        h[fb[i]] += sign
 
 
 @njit(cache=True)
-def _write_pmf(out: np.ndarray, k: int, hc: np.ndarray, hf: np.ndarray, nf: int, n: int) -> None:
+def _write_pmf(out: np.ndarray, k: int, h: np.ndarray, nc: int, nf: int, n: int) -> None:
+    """Row ``k`` = [coarse pmf (nc) | fine pmf (nf, optional)] from the fine counts ``h``."""
     npairs = n * (n - 1) // 2
-    nc = hc.shape[0]
+    g = _NF // nc
     for b in range(nc):
-        out[k, b] = hc[b] / npairs
+        c = 0
+        for j in range(b * g, (b + 1) * g):
+            c += h[j]
+        out[k, b] = c / npairs
     for b in range(nf):
-        out[k, nc + b] = hf[b] / npairs
+        out[k, nc + b] = h[b] / npairs
 
 
 @njit(cache=True)
@@ -214,15 +206,12 @@ def _hod_incremental(
     mx = np.empty(M1)
     my = np.empty(M1)
     mz = np.empty(M1)
-    cb = np.empty(M1, dtype=np.int64)
     fb = np.empty(M1, dtype=np.int64)
     pos = np.full(M1, -1, dtype=np.int64)
     stamp = np.zeros(M1, dtype=np.int64)
     leave = np.empty(M1, dtype=np.int64)
-    hc = np.zeros(nc, dtype=np.int64)
-    hf = np.zeros(max(nf, 1), dtype=np.int64)
-    tc = np.zeros(nc, dtype=np.int64)
-    tf = np.zeros(max(nf, 1), dtype=np.int64)
+    hf = np.zeros(_NF, dtype=np.int64)
+    tf = np.zeros(_NF, dtype=np.int64)
     m = 0
     ops = 0
     for t in range(K):
@@ -244,7 +233,6 @@ def _hod_incremental(
             for i in range(m):
                 pos[members[i]] = -1
             m = 0
-            hc[:] = 0
             hf[:] = 0
             for i in range(nT):
                 b = buf[i]
@@ -255,7 +243,7 @@ def _hod_incremental(
                 mz[i] = cloud[b, 2]
             m = nT
             for i in range(1, m):
-                _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hc, hf, 1, norm, nc, nf, cb, fb)
+                _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hf, 1, norm, fb)
             ops += reb_cost
         else:
             for i in range(nL):
@@ -272,14 +260,14 @@ def _hod_incremental(
                 pos[members[pa]] = pa
                 pos[a] = -1
                 m -= 1
-                _add_pairs(ax, ay, az, mx, my, mz, 0, m, hc, hf, -1, norm, nc, nf, cb, fb)
+                _add_pairs(ax, ay, az, mx, my, mz, 0, m, hf, -1, norm, fb)
             for i in range(nT):
                 b = buf[i]
                 if pos[b] < 0:
                     bx = cloud[b, 0]
                     by = cloud[b, 1]
                     bz = cloud[b, 2]
-                    _add_pairs(bx, by, bz, mx, my, mz, 0, m, hc, hf, 1, norm, nc, nf, cb, fb)
+                    _add_pairs(bx, by, bz, mx, my, mz, 0, m, hf, 1, norm, fb)
                     members[m] = b
                     mx[m] = bx
                     my[m] = by
@@ -290,14 +278,13 @@ def _hod_incremental(
         n = m
         if centre_in_cloud[k]:
             if n >= min_support:
-                _write_pmf(out, k, hc, hf, nf, n)
+                _write_pmf(out, k, hf, nc, nf, n)
         else:
             n = m + 1
             if n >= min_support:
-                tc[:] = hc
                 tf[:] = hf
-                _add_pairs(q[0], q[1], q[2], mx, my, mz, 0, m, tc, tf, 1, norm, nc, nf, cb, fb)
-                _write_pmf(out, k, tc, tf, nf, n)
+                _add_pairs(q[0], q[1], q[2], mx, my, mz, 0, m, tf, 1, norm, fb)
+                _write_pmf(out, k, tf, nc, nf, n)
         sizes[k] = n
     return out, sizes, ops
 
@@ -328,10 +315,8 @@ def _hod_brute(
     mx = np.empty(M1)
     my = np.empty(M1)
     mz = np.empty(M1)
-    cb = np.empty(M1, dtype=np.int64)
     fb = np.empty(M1, dtype=np.int64)
-    hc = np.zeros(nc, dtype=np.int64)
-    hf = np.zeros(max(nf, 1), dtype=np.int64)
+    hf = np.zeros(_NF, dtype=np.int64)
     sizes = np.zeros(which.shape[0], dtype=np.int64)
     for w in range(which.shape[0]):
         k = which[w]
@@ -365,11 +350,10 @@ def _hod_brute(
             if not (dmax > 0.0):
                 continue
             norm = dmax
-        hc[:] = 0
         hf[:] = 0
         for i in range(1, n):
-            _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hc, hf, 1, norm, nc, nf, cb, fb)
-        _write_pmf(out, k, hc, hf, nf, n)
+            _add_pairs(mx[i], my[i], mz[i], mx, my, mz, 0, i, hf, 1, norm, fb)
+        _write_pmf(out, k, hf, nc, nf, n)
     return sizes
 
 
@@ -405,6 +389,38 @@ def _support_sizes_kernel(P: np.ndarray, centres: np.ndarray, radius: float) -> 
     out = np.zeros(centres.shape[0], dtype=np.int64)
     for k in range(centres.shape[0]):
         out[k] = _grid_query(spts, lo, h, dims, start, sidx, centres[k], radius, buf, bd)
+    return out
+
+
+@njit(cache=True)
+def _support_at_least(P: np.ndarray, centres: np.ndarray, radius: float, need: int) -> np.ndarray:
+    """Whether each centre has at least ``need`` points within ``radius`` (early exit)."""
+    lo, h, dims, start, _, spts = _grid_build(P, radius)
+    r2 = radius * radius
+    K = centres.shape[0]
+    out = np.zeros(K, dtype=np.bool_)
+    c0 = np.empty(3, dtype=np.int64)
+    c1 = np.empty(3, dtype=np.int64)
+    for k in range(K):
+        q = centres[k]
+        for d in range(3):
+            c0[d] = max(int(np.floor((q[d] - radius - lo[d]) / h)), 0)
+            c1[d] = min(int(np.floor((q[d] + radius - lo[d]) / h)), dims[d] - 1)
+        cnt = 0
+        for ix in range(c0[0], c1[0] + 1):
+            for iy in range(c0[1], c1[1] + 1):
+                base = (ix * dims[1] + iy) * dims[2]
+                for t in range(start[base + c0[2]], start[base + c1[2] + 1]):
+                    dx = spts[t, 0] - q[0]
+                    dy = spts[t, 1] - q[1]
+                    dz = spts[t, 2] - q[2]
+                    if dx * dx + dy * dy + dz * dz <= r2:
+                        cnt += 1
+                if cnt >= need:
+                    break
+            if cnt >= need:
+                break
+        out[k] = cnt >= need
     return out
 
 
@@ -517,7 +533,7 @@ def hod_histograms(
         A = _poisson_anchors(centres, float(anchor_spacing) * r)
         AC = np.ascontiguousarray(centres[A])
         H, _ = _exact(P, AC, np.ones(A.size, dtype=bool), r, use_max, nc, nf)
-        sizes = _support_sizes_kernel(P, centres, r)
+        valid = _support_at_least(P, centres, r, MIN_SUPPORT)
         k = min(int(n_anchors), A.size)
         d, nn = cKDTree(AC).query(centres, k=k)
         d = d.reshape(K, k)
@@ -528,8 +544,8 @@ def hod_histograms(
         Hz = np.where(okA[:, None], H, 0.0).astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             out = (np.einsum("kj,kjd->kd", w, Hz[nn]) / wsum[:, None]).astype(np.float32)
-        out[sizes < MIN_SUPPORT] = np.nan
-        lost = np.flatnonzero((sizes >= MIN_SUPPORT) & ~(wsum > 0))
+        out[~valid] = np.nan
+        lost = np.flatnonzero(valid & ~(wsum > 0))
         log.debug("HoD fast: %d anchors for %d keypoints, %d fallbacks", A.size, K, lost.size)
         if lost.size:
             _hod_brute(P, centres, all_in, lost, r, use_max, nc, nf, MIN_SUPPORT, out)

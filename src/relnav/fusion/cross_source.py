@@ -387,7 +387,9 @@ class CrossSourceRegistration:
         self.max_rotation_deg = None if max_rotation_deg is None else float(max_rotation_deg)
         self.refine = int(refine)
         if quad_select not in ("farthest", "consistent"):
-            raise ConfigError(f"quad_select must be 'farthest' or 'consistent', got {quad_select!r}")
+            raise ConfigError(
+                f"quad_select must be 'farthest' or 'consistent', got {quad_select!r}"
+            )
         if not 0 < float(keep_frac) <= 1:
             raise ConfigError(f"keep_frac must be in (0, 1], got {keep_frac}")
         self.quad_select = quad_select

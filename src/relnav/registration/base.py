@@ -75,7 +75,7 @@ def register_method(
 def _load_all() -> None:
     import importlib
 
-    for mod in ("feature", "icp", "sparse_icp", "super4pcs", "external"):
+    for mod in ("feature", "clgv", "icp", "sparse_icp", "super4pcs", "external"):
         try:
             importlib.import_module(f"relnav.registration.{mod}")
         except ModuleNotFoundError as e:  # family not written yet in this build

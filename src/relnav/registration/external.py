@@ -36,20 +36,24 @@ constant-velocity prediction for that frame (``last_delta = init`` before ``regi
 ``init=None`` KISS-ICP's own prediction is used (identity for a fresh pipeline). Deskewing is
 off (relnav scans carry no per-point times).
 
-**Result fields** (all methods): ``fitness`` = source points (after the method's own
-downsampling, Open3D's definition: divided by the SOURCE count) with a target point within the
-final gate, divided by the source count; ``inlier_rmse`` = RMS distance of those pairs (m);
-``n_inliers`` = their count; ``n_correspondences`` = putative pairs (FPFH matches for
-``o3d-fpfh-ransac``, otherwise the same as ``n_inliers``). ``covariance`` is the covariance of
-the twist ``δ = [ρ (m), φ (rad)]`` of a LEFT perturbation ``T_true = exp_se3(δ) · T`` (target
-frame), as relnav's own ICP: for small_gicp it is built from its Hessian ``H`` (see
+**Result fields** (all methods, recomputed by relnav at the final estimate): ``fitness`` =
+fraction of the source points (small_gicp: its downsampled source) with a target point within
+the method's final gate (``info["gate"]``: the ICP gate; the refinement gate for
+``o3d-fpfh-ransac``; ``3σ`` of KISS-ICP's adaptive threshold; small_gicp's
+``max_correspondence_distance``) — Open3D's definition, divided by the SOURCE count;
+``inlier_rmse`` = RMS distance of those pairs (m); ``n_inliers`` = their count;
+``n_correspondences`` = putative pairs (the downsampled source points, each with one FPFH match,
+for ``o3d-fpfh-ransac``; otherwise ``n_inliers``). ``covariance`` is the covariance of the twist
+``δ = [ρ (m), φ (rad)]`` of a LEFT perturbation ``T_true = exp_se3(δ) · T`` (target frame, about
+its origin), as relnav's own ICP: for small_gicp it is built from its Hessian ``H`` (see
 :class:`SmallGICPRegistration`); for the others it is the Gauss–Newton covariance
 ``σ² (JᵀJ)⁻¹`` of the final nearest-neighbour pairs (point-to-plane rows ``[nᵀ, (p×n)ᵀ]`` when
-the target has normals, point-to-point blocks ``[I, −[p]×]`` otherwise) with ``σ²`` the residual
-variance. ``info["degeneracy_ratio"]`` is ``λmin/λmax`` of that information matrix with the
-rotation block scaled by the cloud radius; below ``degeneracy_ratio`` the status is
-``degenerate``. Empty, tiny, coincident or collinear clouds, a bad ``init``, no inlier after
-alignment, or an exception inside the library give a ``degenerate``/``failed`` result with a
+the method used target normals, point-to-point blocks ``[I, −[p]×]`` otherwise) with ``σ²`` the
+residual variance. ``info["degeneracy_ratio"]`` is ``λmin/λmax`` of that information matrix
+re-expressed about the cloud centroid with the rotation block scaled by the cloud radius
+(:func:`information_degeneracy`); below the ``degeneracy_ratio`` option (1e-9) the status is
+``degenerate``. Empty, tiny, coincident or collinear clouds, a bad ``init``, fewer than 3 inliers
+after alignment, or an exception inside the library give a ``degenerate``/``failed`` result with a
 ``message`` — never an exception.
 """
 
@@ -339,11 +343,15 @@ class _ExternalBase:
         n_correspondences: int | None = None,
         covariance: np.ndarray | None = None,
         compute_covariance: bool = True,
+        fallback: np.ndarray | None = None,
     ) -> RegistrationResult:
+        """Evaluate ``T`` and build the result; a non-``ok`` result carries ``fallback``
+        (the initial guess; identity by default) and keeps ``T`` in ``info["T_estimate"]``."""
+        fallback = np.eye(4) if fallback is None else fallback
         t0 = time.perf_counter()
         if not np.isfinite(T).all():
             return _flag(
-                "failed", "the library returned a non-finite transform", np.eye(4), timings, info
+                "failed", "the library returned a non-finite transform", fallback, timings, info
             )
         fit = _evaluate(
             T,
@@ -368,8 +376,10 @@ class _ExternalBase:
             status = "degenerate"
             message = f"geometry does not fix 6 DoF (λmin/λmax = {fit.degeneracy_ratio:.2e})"
         cov = covariance if covariance is not None else fit.covariance
+        if status != "ok":
+            info["T_estimate"] = np.array(T, dtype=np.float64)
         return RegistrationResult(
-            T_target_source=np.array(T, dtype=np.float64),
+            T_target_source=np.array(T if status == "ok" else fallback, dtype=np.float64),
             covariance=cov,
             fitness=fit.fitness,
             inlier_rmse=fit.rmse,
@@ -552,6 +562,7 @@ class Open3DICP(_ExternalBase):
             info=info,
             normals=normals,
             compute_covariance=self.covariance,
+            fallback=T0,
         )
 
 
@@ -791,7 +802,8 @@ class KissICPRegistration(_ExternalBase):
     ``data.min_range = min_range``; ``adaptive_threshold.initial_threshold =
     initial_threshold_factor · voxel`` and ``min_motion_th = min_motion_factor · voxel`` (KISS-ICP's
     defaults are 2 and 0.1 of its 1 m voxel); ``registration.convergence_criterion =
-    convergence_factor · voxel``.
+    convergence_factor · voxel``. KISS-ICP does not report convergence: ``converged`` is always
+    True and the quality shows in ``fitness`` / ``inlier_rmse`` (gate ``3σ``).
 
     Parameters
     ----------
@@ -994,6 +1006,7 @@ class KissICPRegistration(_ExternalBase):
             converged=True,
             timings=timings,
             info=info,
+            fallback=predicted,
         )
 
 
@@ -1210,6 +1223,7 @@ class SmallGICPRegistration(_ExternalBase):
             info=info,
             covariance=cov,
             compute_covariance=False,
+            fallback=T0,
         )
         # degeneracy indicator from small_gicp's own Hessian: right perturbation [φ, ρ] in the
         # source frame → [ρ, φ], about the source centroid

@@ -297,10 +297,105 @@ def _transform(P: np.ndarray, T: np.ndarray) -> np.ndarray:  # pragma: no cover 
 
 
 @njit(cache=True)
+def _jacobi_eigh(A_in: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations.
+
+    Returns ``(w, V)`` with ``A = V diag(w) Vᵀ`` (unsorted). Plain loops, no LAPACK: numba
+    compiles it in a fraction of the time ``np.linalg`` needs, and it is exact to rounding.
+    """
+    n = A_in.shape[0]
+    A = A_in.copy()
+    V = np.eye(n)
+    for _sweep in range(60):
+        off = 0.0
+        scale = 0.0
+        for p in range(n):
+            scale += A[p, p] * A[p, p]
+            for q in range(p + 1, n):
+                off += A[p, q] * A[p, q]
+        if off <= 1e-32 * scale or off == 0.0:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = A[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+                t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                sn = t * c
+                for k in range(n):
+                    akp = A[k, p]
+                    akq = A[k, q]
+                    A[k, p] = c * akp - sn * akq
+                    A[k, q] = sn * akp + c * akq
+                for k in range(n):
+                    apk = A[p, k]
+                    aqk = A[q, k]
+                    A[p, k] = c * apk - sn * aqk
+                    A[q, k] = sn * apk + c * aqk
+                for k in range(n):
+                    vkp = V[k, p]
+                    vkq = V[k, q]
+                    V[k, p] = c * vkp - sn * vkq
+                    V[k, q] = sn * vkp + c * vkq
+    w = np.empty(n)
+    for p in range(n):
+        w[p] = A[p, p]
+    return w, V
+
+
+@njit(cache=True)
+def _horn_rotation(H: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Proper rotation ``R`` maximising ``tr(R H)`` for ``H = Σ (x − x̄)(y − ȳ)ᵀ`` (Horn 1987).
+
+    Same minimiser as Arun/Umeyama SVD with the reflection guard; ``y ≈ R x``.
+    """
+    sxx, sxy, sxz = H[0, 0], H[0, 1], H[0, 2]
+    syx, syy, syz = H[1, 0], H[1, 1], H[1, 2]
+    szx, szy, szz = H[2, 0], H[2, 1], H[2, 2]
+    N = np.empty((4, 4))
+    N[0, 0] = sxx + syy + szz
+    N[0, 1] = syz - szy
+    N[0, 2] = szx - sxz
+    N[0, 3] = sxy - syx
+    N[1, 1] = sxx - syy - szz
+    N[1, 2] = sxy + syx
+    N[1, 3] = szx + sxz
+    N[2, 2] = -sxx + syy - szz
+    N[2, 3] = syz + szy
+    N[3, 3] = -sxx - syy + szz
+    for a in range(4):
+        for b in range(a):
+            N[a, b] = N[b, a]
+    w, V = _jacobi_eigh(N)
+    k = 0
+    for a in range(1, 4):
+        if w[a] > w[k]:
+            k = a
+    qw, qx, qy, qz = V[0, k], V[1, k], V[2, k], V[3, k]
+    nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    qw, qx, qy, qz = qw / nq, qx / nq, qy / nq, qz / nq
+    R = np.empty((3, 3))
+    R[0, 0] = qw * qw + qx * qx - qy * qy - qz * qz
+    R[0, 1] = 2.0 * (qx * qy - qw * qz)
+    R[0, 2] = 2.0 * (qx * qz + qw * qy)
+    R[1, 0] = 2.0 * (qx * qy + qw * qz)
+    R[1, 1] = qw * qw - qx * qx + qy * qy - qz * qz
+    R[1, 2] = 2.0 * (qy * qz - qw * qx)
+    R[2, 0] = 2.0 * (qx * qz - qw * qy)
+    R[2, 1] = 2.0 * (qy * qz + qw * qx)
+    R[2, 2] = qw * qw - qx * qx - qy * qy + qz * qz
+    return R
+
+
+@njit(cache=True)
 def _kabsch_pairs(
     X: np.ndarray, Y: np.ndarray, src_idx: np.ndarray, tgt_idx: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - numba
-    """Arun/Umeyama rigid transform ``T`` (4x4) with ``Y[tgt] ≈ R X[src] + t``."""
+    """Rigid transform ``T`` (4x4) with ``Y[tgt] ≈ R X[src] + t`` (least squares, Horn)."""
     m = src_idx.shape[0]
     mx = np.zeros(3)
     my = np.zeros(3)
@@ -320,15 +415,14 @@ def _kabsch_pairs(
             xa = X[i, a] - mx[a]
             for b in range(3):
                 H[a, b] += xa * (Y[j, b] - my[b])
-    U, _s, Vt = np.linalg.svd(H)
-    V = Vt.T
-    D = np.eye(3)
-    if np.linalg.det(V @ U.T) < 0:
-        D[2, 2] = -1.0
-    R = V @ D @ U.T
+    R = _horn_rotation(H)
     T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = my - R @ mx
+    for a in range(3):
+        ta = my[a]
+        for b in range(3):
+            T[a, b] = R[a, b]
+            ta -= R[a, b] * mx[b]
+        T[a, 3] = ta
     return T
 
 
@@ -377,9 +471,13 @@ def _plane_system(
 def _point_information(
     X: np.ndarray, Y: np.ndarray, src_idx: np.ndarray, tgt_idx: np.ndarray
 ) -> tuple[np.ndarray, float]:  # pragma: no cover - numba
-    """``Σ JᵀJ`` (6x6, order [ρ, φ]) with ``J = [I, −[p]×]`` and ``Σ|p − y|²``."""
+    """``Σ JᵀJ`` (6x6, order [ρ, φ]) with ``J = [I, −[p]×]``, and ``Σ|p − y|²``.
+
+    ``JᵀJ = [[m I, −Σ[p]×], [Σ[p]×, Σ(|p|² I − p pᵀ)]]``.
+    """
     A = np.zeros((6, 6))
     r2 = 0.0
+    s0 = s1 = s2 = 0.0
     for k in range(src_idx.shape[0]):
         i = src_idx[k]
         j = tgt_idx[k]
@@ -387,18 +485,31 @@ def _point_information(
         for a in range(3):
             d = X[i, a] - Y[j, a]
             r2 += d * d
-        # J = [I, -P] with P = [p]x ; JᵀJ = [[I, -P], [Pᵀ... ]] ; -P = Pᵀ
-        # [p]x = [[0,-p2,p1],[p2,0,-p0],[-p1,p0,0]]
-        Pm = np.array([[0.0, -p2, p1], [p2, 0.0, -p0], [-p1, p0, 0.0]])
-        for a in range(3):
-            A[a, a] += 1.0
-            for b in range(3):
-                A[a, 3 + b] += -Pm[a, b]
-                A[3 + b, a] += -Pm[a, b]
-        PtP = Pm.T @ Pm
-        for a in range(3):
-            for b in range(3):
-                A[3 + a, 3 + b] += PtP[a, b]
+        s0 += p0
+        s1 += p1
+        s2 += p2
+        pp = p0 * p0 + p1 * p1 + p2 * p2
+        A[3, 3] += pp - p0 * p0
+        A[4, 4] += pp - p1 * p1
+        A[5, 5] += pp - p2 * p2
+        A[3, 4] -= p0 * p1
+        A[3, 5] -= p0 * p2
+        A[4, 5] -= p1 * p2
+    m = float(src_idx.shape[0])
+    A[0, 0] = A[1, 1] = A[2, 2] = m
+    # upper-right block −Σ[p]×, with [p]× = [[0, −p2, p1], [p2, 0, −p0], [−p1, p0, 0]]
+    A[0, 4] = s2
+    A[0, 5] = -s1
+    A[1, 3] = -s2
+    A[1, 5] = s0
+    A[2, 3] = s1
+    A[2, 4] = -s0
+    A[4, 3] = A[3, 4]
+    A[5, 3] = A[3, 5]
+    A[5, 4] = A[4, 5]
+    for a in range(3):
+        for b in range(3):
+            A[3 + b, a] = A[a, 3 + b]
     return A, r2
 
 

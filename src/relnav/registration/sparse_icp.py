@@ -55,6 +55,8 @@ from relnav.registration.icp import (
     PAPER_GATE,
     PreparedCloud,
     _failed,
+    _horn_rotation,
+    _jacobi_eigh,
     _total,
     _transform,
     check_init,
@@ -113,6 +115,7 @@ def _apply(X: np.ndarray, R: np.ndarray, t: np.ndarray) -> None:
 
 @njit(cache=True)
 def _kabsch(X: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``(R, t)`` with ``U ≈ R X + t`` (Horn's quaternion method)."""
     n = X.shape[0]
     mx = np.zeros(3)
     mu_ = np.zeros(3)
@@ -128,13 +131,22 @@ def _kabsch(X: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             xa = X[i, a] - mx[a]
             for b in range(3):
                 H[a, b] += xa * (U[i, b] - mu_[b])
-    Uu, _s, Vt = np.linalg.svd(H)
-    V = Vt.T
-    D = np.eye(3)
-    if np.linalg.det(V @ Uu.T) < 0:
-        D[2, 2] = -1.0
-    R = V @ D @ Uu.T
-    return R, mu_ - R @ mx
+    R = _horn_rotation(H)
+    t = np.empty(3)
+    for a in range(3):
+        t[a] = mu_[a] - (R[a, 0] * mx[0] + R[a, 1] * mx[1] + R[a, 2] * mx[2])
+    return R, t
+
+
+@njit(cache=True)
+def _compose_left(R: np.ndarray, t: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """``[R t; 0 1] @ T`` for a 4x4 ``T`` (plain loops)."""
+    out = np.eye(4)
+    for a in range(3):
+        for b in range(4):
+            out[a, b] = R[a, 0] * T[0, b] + R[a, 1] * T[1, b] + R[a, 2] * T[2, b]
+        out[a, 3] += t[a]
+    return out
 
 
 @njit(cache=True)
@@ -148,7 +160,13 @@ def _rodrigues_nb(w: np.ndarray) -> np.ndarray:
     k0, k1, k2 = w[0] / th, w[1] / th, w[2] / th
     K[0, 1], K[0, 2], K[1, 2] = -k2, k1, -k0
     K[1, 0], K[2, 0], K[2, 1] = k2, -k1, k0
-    return np.eye(3) + math.sin(th) * K + (1.0 - math.cos(th)) * (K @ K)
+    s, c1 = math.sin(th), 1.0 - math.cos(th)
+    R = np.eye(3)
+    for a in range(3):
+        for b in range(3):
+            kk = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
+            R[a, b] += s * K[a, b] + c1 * kk
+    return R
 
 
 @njit(cache=True)
@@ -179,13 +197,14 @@ def _plane_fit(
             b[p] -= a6[p] * r
             for q in range(6):
                 A[p, q] += a6[p] * a6[q]
-    w, V = np.linalg.eigh(A)
+    w, V = _jacobi_eigh(A)
     ok = True
     x = np.zeros(6)
-    if w[5] <= 0.0:
+    wmax = w.max()
+    if wmax <= 0.0:
         return np.eye(3), np.zeros(3), False
     for k in range(6):
-        if w[k] > w[5] * 1e-12:
+        if w[k] > wmax * 1e-12:
             coef = 0.0
             for p in range(6):
                 coef += V[p, k] * b[p]
@@ -194,7 +213,9 @@ def _plane_fit(
         else:
             ok = False
     R = _rodrigues_nb(x[:3])
-    t = c + x[3:] - R @ c
+    t = np.empty(3)
+    for a in range(3):
+        t[a] = c[a] + x[3 + a] - (R[a, 0] * c[0] + R[a, 1] * c[1] + R[a, 2] * c[2])
     return R, t, ok
 
 
@@ -239,10 +260,7 @@ def _admm_point(
             R, t = _kabsch(X, U)
             _apply(X, R, t)
             fits += 1
-            Tn = np.eye(4)
-            Tn[:3, :3] = R
-            Tn[:3, 3] = t
-            Tacc = Tn @ Tacc
+            Tacc = _compose_left(R, t, Tacc)
             dual = 0.0
             for i in range(n):
                 d = 0.0
@@ -310,10 +328,7 @@ def _admm_plane(
             full_rank = full_rank and ok
             _apply(X, R, t)
             fits += 1
-            Tn = np.eye(4)
-            Tn[:3, :3] = R
-            Tn[:3, 3] = t
-            Tacc = Tn @ Tacc
+            Tacc = _compose_left(R, t, Tacc)
             dual = 0.0
             for i in range(n):
                 d = 0.0
