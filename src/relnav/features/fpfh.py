@@ -4,7 +4,10 @@ Pair features exactly as PCL's ``computePairFeatures`` (ALGORITHMS §A.3): for `
 normals ``n1, n2``, ``Δ = p2 − p1``, the source is the point whose normal makes the smaller angle
 with the line; Darboux frame ``u = n1``, ``v = Δ × u / ‖Δ × u‖``, ``w = u × v``;
 ``f1 = atan2(w·n2, u·n2)``, ``f2 = v·n2``, ``f3 = ±n·Δ/‖Δ‖``. Degenerate pairs (coincident points,
-``Δ ∥ n1``) give ``f = (0, 0, 0)`` and are binned, as PCL and Open3D do.
+``Δ ∥ n1``) give ``f = (0, 0, 0)`` and are binned, as PCL and Open3D do. Source-selection ties
+(``| |n1·Δ| − |n2·Δ| | ≤ 1e-12·‖Δ‖``, e.g. identical PCA normals) keep ``p1`` as source, as PCL
+does for exact ties **[interpretation: the tolerance makes the choice robust to rounding, so
+the descriptor is rigid-motion invariant; PCL's f3 sign flips with rounding there]**.
 
 SPFH(p): for each neighbour ``q ≠ p`` (by index) within ``r``, ``f1`` is binned into 11 bins over
 ``[−π, π]`` and ``f2, f3`` into 11 bins over ``[−1, 1]``, each increment ``100/(k − 1)`` (``k``
@@ -48,6 +51,8 @@ log = logging.getLogger(__name__)
 
 NR_BINS = 11
 FPFH_DIM = 3 * NR_BINS  # 33
+_TIE = 1e-12
+"""Source-selection tie tolerance on ``|n·Δ|/‖Δ‖`` (see :func:`_pair_features`)."""
 
 
 @njit(cache=True)
@@ -74,8 +79,10 @@ def _pair_features(
         return 0.0, 0.0, 0.0, 0.0
     a1 = (n1x * dx + n1y * dy + n1z * dz) / f4
     a2 = (n2x * dx + n2y * dy + n2z * dz) / f4
-    # PCL: acos(|a1|) > acos(|a2|); acos is decreasing, so compare |a1| < |a2| directly
-    if abs(a1) < abs(a2):
+    # PCL swaps when acos(|a1|) > acos(|a2|), i.e. |a1| < |a2|. A tie (e.g. two points with
+    # identical PCA normals) keeps p1 as source in PCL; ties within _TIE are treated the same so
+    # that rounding (e.g. after a rigid motion) cannot flip the sign of f3.
+    if abs(a2) - abs(a1) > _TIE:
         ux, uy, uz = n2x, n2y, n2z
         mx, my, mz = n1x, n1y, n1z
         dx, dy, dz = -dx, -dy, -dz

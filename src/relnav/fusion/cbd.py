@@ -5,18 +5,20 @@ curvature-based descriptor built from CGA sphere fits. The original is not avail
 this is **[interpretation]** of the summary in paper 2 §1/§2.2.1 (ALGORITHMS §G.7):
 
 1. **Curvature** of every point: algebraic CGA sphere fit to its ``k`` (20) nearest neighbours,
-   minimising ``Σ (Xᵢ·S)²`` over normalised spheres ``S = c + ½(‖c‖² − ρ²) e∞ + e0`` (linear in
-   ``c`` and ``½(‖c‖² − ρ²)``: the Kåsa fit, since ``X·S = x·c − ½‖x‖² − ½(‖c‖² − ρ²)``);
-   curvature ``κ = 1/ρ`` (0 for flat or degenerate neighbourhoods).
+   minimising ``Σ (Xᵢ·S)²`` over IPNS spheres ``S = s + s∞ e∞ + s0 e0`` subject to
+   ``S·S = ‖s‖² − 2 s∞ s0 = 1`` (Pratt's normalisation, a 5×5 generalised eigenproblem; planes
+   are the spheres with ``s0 = 0``); ``ρ = 1/|s0|``, curvature ``κ = |s0|`` (0 for flat
+   neighbourhoods).
 2. **Feature points**: points whose curvature is at or above the ``feature_quantile`` (0.5)
    quantile of the cloud's curvature distribution (the "selected part of the distribution"),
    thinned by farthest point sampling to ``max_features`` (300).
 3. **Descriptor** of feature ``i``: over the feature points ``j`` within ``radius``, the
-   normalised histograms (``n_bins`` = 12 each) of the point-to-sphere distances ``‖xᵢ − c_j‖ − ρ_j``
-   (clipped to ``±radius``), of the point-to-point distances ``‖xᵢ − x_j‖ = sqrt(−2 Xᵢ·X_j)``
-   — both CGA inner products — and a joint histogram of (distance shell, curvature rank of
-   ``j`` within its cloud). Default radius ``radius_factor = 1.5`` × the LIDAR RMS radius
-   (chosen on li-rotating: smaller radii were not discriminative).
+   normalised histograms (``n_bins`` = 12 each) of the point-to-sphere distances
+   ``‖xᵢ − c_j‖ − ρ_j`` (clipped to ``±radius``), of the point-to-point distances
+   ``‖xᵢ − x_j‖ = sqrt(−2 Xᵢ·X_j)`` — both CGA inner products — and a joint histogram of
+   (distance shell, curvature rank of ``j`` within its cloud). Default radius
+   ``radius_factor = 1.5`` × the LIDAR RMS radius (chosen on li-rotating: smaller radii were
+   not discriminative).
    **[interpretation]** the camera cloud is described after voxel-downsampling to the LIDAR's
    resolution (``match_density``), so that both clouds' k-NN neighbourhoods have a similar
    metric size.
@@ -58,7 +60,7 @@ log = logging.getLogger(__name__)
 def sphere_fit_curvature(
     points: np.ndarray, *, k: int = 20, tree: cKDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-point CGA (Kåsa) sphere fit of the ``k`` nearest neighbours.
+    """Per-point CGA sphere fit (Pratt normalisation ``S·S = 1``) of the ``k`` nearest neighbours.
 
     Parameters
     ----------
@@ -88,21 +90,25 @@ def sphere_fit_curvature(
     scale = np.sqrt(np.mean(np.sum((nb - mu) ** 2, axis=2), axis=1))
     scale = np.where(scale > 0, scale, 1.0)
     X = (nb - mu) / scale[:, None, None]  # conditioned local coordinates
-    # rows [x, y, z, -1] · [c; k'] = ½‖x‖²  (X·S = 0)
-    A = np.concatenate([X, -np.ones((n, kk, 1))], axis=2)
-    b = 0.5 * np.sum(X * X, axis=2)
-    AtA = np.einsum("nki,nkj->nij", A, A)
-    Atb = np.einsum("nki,nk->ni", A, b)
-    ridge = 1e-9 * np.trace(AtA, axis1=1, axis2=2)[:, None, None] * np.eye(4)
-    sol = np.linalg.solve(AtA + ridge, Atb[..., None])[..., 0]
-    c = sol[:, :3]
-    r2 = np.sum(c * c, axis=1) - 2.0 * sol[:, 3]
+    # X·S = x·s − s∞ − ½‖x‖² s0 for S = s + s∞ e∞ + s0 e0; rows [x, −1, −½‖x‖²]
+    D = np.concatenate([X, -np.ones((n, kk, 1)), -0.5 * np.sum(X * X, axis=2)[..., None]], 2)
+    A = np.einsum("nki,nkj->nij", D, D)
+    Nm = np.zeros((5, 5))
+    Nm[:3, :3] = np.eye(3)
+    Nm[3, 4] = Nm[4, 3] = -1.0  # S·S = ‖s‖² − 2 s∞ s0 (Pratt)
+    vals, vecs = np.linalg.eig(Nm @ A)  # Nm⁻¹ = Nm
+    vals, vecs = vals.real, vecs.real
+    q = np.einsum("nai,ab,nbi->ni", vecs, Nm, vecs)
+    cand = np.where(q > 1e-12, vals, np.inf)
+    j = np.argmin(cand, axis=1)
+    v = vecs[np.arange(n), :, j] / np.sqrt(np.maximum(q[np.arange(n), j], 1e-300))[:, None]
+    s0 = np.abs(v[:, 4])
+    ok = np.isfinite(cand[np.arange(n), j]) & (s0 > 1e-6)
     with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.sqrt(np.where(r2 > 0, r2, np.nan)) * scale
-    ok = np.isfinite(r) & (r > 0) & (r < 1e6 * scale)
+        c = v[:, :3] / v[:, 4:5]
+    curv = np.where(ok, s0 / scale, 0.0)  # ρ = 1/|s0| in conditioned units
     centres = np.where(ok[:, None], mu[:, 0, :] + c * scale[:, None], np.nan)
-    radii = np.where(ok, r, np.inf)
-    curv = np.where(ok, 1.0 / np.where(ok, r, 1.0), 0.0)
+    radii = np.where(ok, scale / np.where(ok, s0, 1.0), np.inf)
     return curv, centres, radii
 
 

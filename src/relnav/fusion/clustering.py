@@ -23,7 +23,10 @@ point onto the nearest plane (or line) grown from the dense camera cloud, or dis
    (``L = p1 ∧ p2 ∧ e∞``: stored as a point and a unit direction).
 4. **LIDAR points** (already in the camera frame) get PCA normals from their own ``lidar_k``
    (10) neighbours. The nearest plane/line is the segment, among those of the ``n_nearest`` (8)
-   nearest labelled camera points, with the smallest orthogonal distance. A point is kept if
+   nearest labelled camera points, with the smallest orthogonal distance; **[interpretation]**
+   segments are finite — one whose nearest member point is farther than
+   ``max(δ, 2·plane_dist) + 2·plane_dist`` does not count (a point beyond a face's edge is not
+   snapped onto its infinite plane). A point is kept if
    ``arccos(|n_i·n_j|) ≤ σ = 45°`` (planes; for lines the LIDAR normal must be within ``σ`` of
    perpendicular to the line, **[interpretation]**) **and** its distance is ``≤ δ``; a LIDAR
    neighbourhood that is itself collinear (scan line, ``F_L > 0.8``) has no defined normal and
@@ -576,8 +579,9 @@ def cluster_and_project(
         no_normal = np.ones(n_l, dtype=bool)
     # candidate segments from the nearest labelled camera points
     kk = int(min(n_nearest, labelled.size))
-    _, nn = cKDTree(C[labelled]).query(L, k=kk)
+    d_nn, nn = cKDTree(C[labelled]).query(L, k=kk)
     nn = nn.reshape(n_l, kk)
+    d_nn = d_nn.reshape(n_l, kk)
     cand = seg_of[labelled[nn]]  # (N, kk)
     r = L[:, None, :] - seg_a[cand]  # (N, kk, 3)
     u = seg_n[cand]
@@ -585,6 +589,9 @@ def cluster_and_project(
     plane_dist_c = np.abs(np.einsum("nki,nki->nk", L[:, None, :], u) - seg_d[cand])
     line_dist_c = np.linalg.norm(r - along[..., None] * u, axis=2)
     dist_c = np.where(is_line[cand], line_dist_c, plane_dist_c)
+    # a segment is a candidate only where it has support: one of its points within the gate
+    support = max(delta_v, 2.0 * plane_dist) + 2.0 * plane_dist
+    dist_c = np.where(d_nn <= support, dist_c, np.inf)
     best = np.argmin(dist_c, axis=1)
     rows = np.arange(n_l)
     seg = cand[rows, best]

@@ -39,7 +39,9 @@ Algorithm (paper 2 §2.2.2 steps 1–5 with the readings of ALGORITHMS §G.2; ev
    ``max_rotation_deg`` (with ``init``'s rotation, identity by default) restricts the hypotheses
    when the sensors' relative attitude is roughly known; ``init`` alone skips the search.
 5. **Feature sphere.** A sample is retained when at least 4 candidates pass; the 4 are chosen
-   mutually farthest apart (FPS inside the candidate set, ALGORITHMS default) and the sphere
+   mutually farthest apart (FPS inside the candidate set, ALGORITHMS default;
+   ``quad_select="consistent"`` first keeps the ``keep_frac`` of the candidates with the smallest
+   d⁴ residual) and the sphere
    through them is fitted (:func:`relnav.geometry.cga.spheres_through_points`). Candidates lie
    on a small, locally almost flat patch of the surface, where a sphere through 4 noisy points is
    ill-conditioned (its centre lies far off the surface), so **[interpretation]** the 4 points
@@ -301,6 +303,10 @@ class CrossSourceRegistration:
         Only hypotheses within this angle of the prior rotation (``init`` or identity).
     refine : int
         Extra matching passes gated by the current motor estimate.
+    quad_select : {"farthest", "consistent"}
+        How the 4 sphere points are picked among the candidates (module docstring, step 5).
+    keep_frac : float
+        Fraction of the candidates kept by ``quad_select="consistent"``.
     min_retained : int
         Fewer retained samples → ``degenerate``.
     min_fitness : float

@@ -24,17 +24,18 @@ returns ``Observation(position, quaternion, quality)``:
 * ``quaternion`` (4,) — ``(x, y, z, w)``, ``w ≥ 0``, of ``R_{S_k,B} = R_{S_k,M}``: the target's
   attitude relative to its attitude at frame 0, expressed as the rotation from body to current
   sensor axes (identity at frame 0);
-* ``quality`` — ICP fitness in ``[0, 1]`` (1 at frame 0). ``0`` means no usable registration:
-  the pose is then the motion-prior prediction, the frame is not added to the model, and a
-  filter should skip the update.
+* ``quality`` — fraction in ``[0, 1]`` of the frame's (voxel-downsampled) points within
+  ``quality_gate`` (3) voxels of the model after registration (1 at frame 0). ``0`` means no
+  usable registration: the pose is then the motion-prior prediction, the frame is not added to
+  the model, and a filter should skip the update.
 
 Registration of frame ``k``: ICP (``registration``, default point-to-point, 50 iterations) of
 the voxel-downsampled frame onto the model from the constant-velocity prediction
-``T_{M,S_{k−1}} · (T_{M,S_{k−2}}⁻¹ T_{M,S_{k−1}})`` (or ``init`` when given). If its fitness is
+``T_{M,S_{k−1}} · (T_{M,S_{k−2}}⁻¹ T_{M,S_{k−1}})`` (or ``init`` when given). If its quality is
 below ``min_fitness`` — and always at frame 1, when there is no velocity yet — the
 rotation-invariant CGA registration (:class:`~relnav.fusion.cross_source.
 CrossSourceRegistration`, used here same-source) provides a global start and ICP is re-run from
-it; the better result (fitness, then RMSE) is kept.
+it; the better result (quality, then RMSE) is kept.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ import math
 from typing import Any, NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.geometry.neighbors import mean_resolution
@@ -66,7 +68,8 @@ class Observation(NamedTuple):
     quaternion : (4,) float64
         ``(x, y, z, w)`` of ``R_sensor_body`` (``w ≥ 0``).
     quality : float
-        ICP fitness in ``[0, 1]``; ``0`` = no usable registration (prediction returned).
+        Overlap with the model in ``[0, 1]``; ``0`` = no usable registration (prediction
+        returned).
     """
 
     position: np.ndarray
@@ -87,10 +90,13 @@ class ContourModel:
         Frame → model method (``relnav.registration.get_registration`` name or object);
         default point-to-point ICP with 50 iterations.
     min_fitness : float
-        Below this ICP fitness the global (CGA) start is tried; a final fitness below
+        Below this quality the global (CGA) start is tried; a final quality below
         ``reject_fitness`` gives ``quality = 0``.
     reject_fitness : float
         See ``min_fitness``.
+    quality_gate : float
+        Quality = fraction of the (downsampled) frame's points within ``quality_gate × voxel``
+        of the model after registration.
     global_start : bool
         Allow the CGA global start (``False``: ICP from the prediction only).
     max_model_points : int
@@ -115,6 +121,7 @@ class ContourModel:
         reject_fitness: float = 0.3,
         global_start: bool = True,
         max_model_points: int = 60000,
+        quality_gate: float = 3.0,
         seed: int = 0,
     ) -> None:
         if voxel_size is not None and not (float(voxel_size) > 0):
@@ -142,6 +149,9 @@ class ContourModel:
         self.reject_fitness = float(reject_fitness)
         self.global_start = bool(global_start)
         self.max_model_points = int(max_model_points)
+        if not float(quality_gate) > 0:
+            raise ConfigError(f"quality_gate must be > 0, got {quality_gate}")
+        self.quality_gate = float(quality_gate)
         self.seed = int(seed)
         self.reset()
 
@@ -216,34 +226,32 @@ class ContourModel:
         if P.shape[0] < 10:
             return self._reject(pred, k, "frame has fewer than 10 points")
         src = self._downsample(P)
+        tree = cKDTree(self._model)
         res = self._reg.register(src, self._model, init=pred)
+        q = self._quality(src, res, tree)
         how = "prediction"
         need_global = self.global_start and (
-            (len(self._poses) == 1 and init is None) or not res.ok or res.fitness < self.min_fitness
+            (len(self._poses) == 1 and init is None) or q < self.min_fitness
         )
         if need_global:
             g = self._global(src)
             if g is not None and g.ok:
                 res2 = self._reg.register(src, self._model, init=g.T_target_source)
-                if res2.ok and (
-                    not res.ok
-                    or res2.fitness > res.fitness + 1e-9
-                    or (
-                        abs(res2.fitness - res.fitness) <= 1e-9
-                        and res2.inlier_rmse < res.inlier_rmse
-                    )
+                q2 = self._quality(src, res2, tree)
+                if q2 > q + 1e-9 or (
+                    abs(q2 - q) <= 1e-9 and res2.ok and res2.inlier_rmse < res.inlier_rmse
                 ):
-                    res, how = res2, "global"
+                    res, q, how = res2, q2, "global"
         self.last_result = res
-        if not res.ok or res.fitness < self.reject_fitness:
-            return self._reject(pred, k, f"registration {res.status}, fitness {res.fitness:.2f}")
+        if q < self.reject_fitness:
+            return self._reject(pred, k, f"registration {res.status}, quality {q:.2f}")
         T = res.T_target_source
         self._merge(P, T)
         self._poses.append(T)
         self.T_model_frame = T
-        obs = self._observation(T, float(res.fitness))
+        obs = self._observation(T, q)
         self.history.append(
-            {"frame": k, "accepted": True, "fitness": float(res.fitness),
+            {"frame": k, "accepted": True, "quality": q, "fitness": float(res.fitness),
              "rmse": float(res.inlier_rmse), "start": how, "model_points": len(self._model)}
         )  # fmt: skip
         return obs
@@ -263,10 +271,23 @@ class ContourModel:
         self._poses.append(T)
         self.T_model_frame = T
         self.history.append(
-            {"frame": k, "accepted": True, "fitness": 1.0, "rmse": 0.0, "start": "first",
+            {"frame": k, "accepted": True, "quality": 1.0, "rmse": 0.0, "start": "first",
              "model_points": len(self._model), "seed": self.seed, "voxel": self._voxel}
         )  # fmt: skip
         return self._observation(T, 1.0)
+
+    def _quality(self, src: np.ndarray, res: RegistrationResult, tree: cKDTree) -> float:
+        """Fraction of frame points within ``quality_gate × voxel`` of the model."""
+        if not res.ok:
+            return 0.0
+        assert self._voxel is not None
+        T = res.T_target_source
+        d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=self._gate())
+        return float(np.mean(np.isfinite(d))) if d.size else 0.0
+
+    def _gate(self) -> float:
+        assert self._voxel is not None
+        return self.quality_gate * self._voxel
 
     def _predict(self) -> np.ndarray:
         if len(self._poses) >= 2:

@@ -69,7 +69,6 @@ from typing import Any, Literal
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError
 from relnav.geometry.neighbors import mean_resolution
@@ -99,6 +98,220 @@ PAPER_ROTATION_TOL = 0.009
 Thresholds = Literal["scale", "paper"]
 
 
+# --------------------------------------------------------------------------- KD-tree (numba)
+
+
+@njit(cache=True)
+def _kd_build(
+    P: np.ndarray, leaf_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Implicit balanced KD-tree: node ``k`` covers ``[s, e)`` of the permuted points, children
+    ``2k+1`` (``[s, m)``) and ``2k+2`` (``[m, e)``) with ``m = (s + e) // 2``; split on the axis
+    of largest spread at the median. Returns ``(points_permuted, perm, split_dim, split_val)``
+    (``split_dim = -1`` marks leaves)."""
+    n = P.shape[0]
+    perm = np.arange(n)
+    depth = 0
+    sz = n
+    while sz > leaf_size:
+        sz = (sz + 1) // 2
+        depth += 1
+    n_nodes = (1 << (depth + 1)) - 1
+    split_dim = np.full(n_nodes, -1, np.int64)
+    split_val = np.zeros(n_nodes)
+    cap = 2 * depth + 8
+    st_n = np.empty(cap, np.int64)
+    st_s = np.empty(cap, np.int64)
+    st_e = np.empty(cap, np.int64)
+    st_n[0], st_s[0], st_e[0] = 0, 0, n
+    top = 1
+    while top > 0:
+        top -= 1
+        node, s, e = st_n[top], st_s[top], st_e[top]
+        if e - s <= leaf_size:
+            continue
+        best_d = 0
+        best_sp = -1.0
+        for d in range(3):
+            lo = np.inf
+            hi = -np.inf
+            for k in range(s, e):
+                v = P[perm[k], d]
+                lo = min(lo, v)
+                hi = max(hi, v)
+            if hi - lo > best_sp:
+                best_sp = hi - lo
+                best_d = d
+        sub = perm[s:e].copy()
+        order = np.argsort(P[sub, best_d])
+        for k in range(e - s):
+            perm[s + k] = sub[order[k]]
+        m = (s + e) // 2
+        split_dim[node] = best_d
+        split_val[node] = P[perm[m], best_d]
+        st_n[top], st_s[top], st_e[top] = 2 * node + 1, s, m
+        top += 1
+        st_n[top], st_s[top], st_e[top] = 2 * node + 2, m, e
+        top += 1
+    Pp = np.empty((n, 3))
+    for k in range(n):
+        for d in range(3):
+            Pp[k, d] = P[perm[k], d]
+    return Pp, perm, split_dim, split_val
+
+
+@njit(cache=True)
+def _kd_query(
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    Q: np.ndarray,
+    T: np.ndarray,
+    r: float,
+    exclude_self: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Nearest neighbour of every ``T @ Q[i]`` closer than ``r`` (exact; strict bound).
+
+    Returns ``(X, idx, dist)``: transformed queries, original indices (-1: none within ``r``)
+    and distances (inf: none). ``exclude_self`` skips index ``i`` for query ``i``.
+    """
+    n = Pp.shape[0]
+    m = Q.shape[0]
+    X = np.empty((m, 3))
+    out_i = np.full(m, -1, np.int64)
+    out_d = np.full(m, np.inf)
+    st_n = np.empty(128, np.int64)
+    st_s = np.empty(128, np.int64)
+    st_e = np.empty(128, np.int64)
+    st_lb = np.empty(128)
+    r2 = r * r if r < np.inf else np.inf
+    n_nodes = split_dim.shape[0]
+    for qi in range(m):
+        a0, a1, a2 = Q[qi, 0], Q[qi, 1], Q[qi, 2]
+        q0 = T[0, 0] * a0 + T[0, 1] * a1 + T[0, 2] * a2 + T[0, 3]
+        q1 = T[1, 0] * a0 + T[1, 1] * a1 + T[1, 2] * a2 + T[1, 3]
+        q2 = T[2, 0] * a0 + T[2, 1] * a1 + T[2, 2] * a2 + T[2, 3]
+        X[qi, 0], X[qi, 1], X[qi, 2] = q0, q1, q2
+        best = r2
+        bi = -1
+        st_n[0], st_s[0], st_e[0], st_lb[0] = 0, 0, n, 0.0
+        top = 1
+        while top > 0:
+            top -= 1
+            if st_lb[top] >= best:
+                continue
+            node, s, e = st_n[top], st_s[top], st_e[top]
+            dim = split_dim[node] if node < n_nodes else -1
+            if dim < 0:
+                for k in range(s, e):
+                    d0 = Pp[k, 0] - q0
+                    d1 = Pp[k, 1] - q1
+                    d2 = Pp[k, 2] - q2
+                    dd = d0 * d0 + d1 * d1 + d2 * d2
+                    if dd < best and not (exclude_self and perm[k] == qi):
+                        best = dd
+                        bi = k
+                continue
+            mid = (s + e) // 2
+            qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
+            diff = qv - split_val[node]
+            if diff < 0.0:
+                near_n, near_s, near_e = 2 * node + 1, s, mid
+                far_n, far_s, far_e = 2 * node + 2, mid, e
+            else:
+                near_n, near_s, near_e = 2 * node + 2, mid, e
+                far_n, far_s, far_e = 2 * node + 1, s, mid
+            st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
+            top += 1
+            st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
+            top += 1
+        if bi >= 0:
+            out_i[qi] = perm[bi]
+            out_d[qi] = math.sqrt(best)
+    return X, out_i, out_d
+
+
+class KDTree:
+    """Static 3-D KD-tree in numba: exact nearest neighbour within an optional distance bound.
+
+    About 3–7× faster per query than :class:`scipy.spatial.cKDTree` for the single-NN queries
+    of ICP, and :meth:`nn` transforms the queries on the fly (one pass per iteration).
+    :meth:`query` mirrors ``cKDTree.query`` (``k > 1`` falls back to a cKDTree built lazily).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Finite points (m).
+    leaf_size : int
+        Points per leaf.
+    """
+
+    def __init__(self, points: np.ndarray, leaf_size: int = 16) -> None:
+        P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        self.data = P
+        self.n = int(P.shape[0])
+        self._Pp, self._perm, self._dim, self._val = _kd_build(P, int(leaf_size))
+        self._ckd: Any = None
+
+    def nn(
+        self,
+        queries: np.ndarray,
+        max_distance: float = math.inf,
+        *,
+        T: np.ndarray | None = None,
+        exclude_self: bool = False,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nearest neighbour of each (optionally transformed) query point.
+
+        Parameters
+        ----------
+        queries : (M, 3) float64
+            Query points.
+        max_distance : float
+            Only neighbours strictly closer than this (m) are returned.
+        T : (4, 4) float64, optional
+            Transform applied to the queries first.
+        exclude_self : bool
+            Skip point ``i`` for query ``i`` (queries = the tree's own points).
+
+        Returns
+        -------
+        X : (M, 3) float64
+            The (transformed) queries.
+        idx : (M,) int64
+            Index of the nearest point, ``-1`` when none is within ``max_distance``.
+        dist : (M,) float64
+            Its distance (m), ``inf`` when none.
+        """
+        Q = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
+        TT = np.eye(4) if T is None else np.ascontiguousarray(T, dtype=np.float64)
+        return _kd_query(
+            self._Pp, self._perm, self._dim, self._val, Q, TT, float(max_distance), exclude_self
+        )
+
+    def query(
+        self,
+        x: np.ndarray,
+        k: int = 1,
+        distance_upper_bound: float = math.inf,
+        **kwargs: Any,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``cKDTree.query`` semantics: ``(d, i)``; missing neighbours give ``inf`` and ``n``."""
+        if k != 1 or kwargs.get("p", 2) != 2 or kwargs.get("eps", 0) != 0:
+            if self._ckd is None:
+                from scipy.spatial import cKDTree
+
+                self._ckd = cKDTree(self.data)
+            return self._ckd.query(x, k=k, distance_upper_bound=distance_upper_bound, **kwargs)
+        xa = np.asarray(x, dtype=np.float64)
+        _, i, d = self.nn(xa.reshape(-1, 3), distance_upper_bound)
+        i = np.where(i < 0, self.n, i)
+        if xa.ndim == 1:
+            return d[0], i[0]
+        return d, i
+
+
 # --------------------------------------------------------------------------- cloud preparation
 
 
@@ -110,7 +323,7 @@ class PreparedCloud:
     ----------
     points : (N, 3) float64
         Finite points of the cloud (its own frame, m).
-    tree : scipy.spatial.cKDTree or None
+    tree : KDTree or None
         KD-tree of ``points`` (None when the cloud is unusable).
     resolution : float
         Mean resolution ``Tr`` (m); NaN when not computed or fewer than 2 distinct points.
@@ -129,7 +342,7 @@ class PreparedCloud:
     """
 
     points: np.ndarray
-    tree: cKDTree | None = None
+    tree: KDTree | None = None
     resolution: float = float("nan")
     radius: float = float("nan")
     normals: np.ndarray | None = None
@@ -222,13 +435,12 @@ def prepare_cloud(
     if ev[1] <= 1e-10 * ev[2]:
         msg = f"{name}: points are collinear"
         return PreparedCloud(P, radius=radius, status="degenerate", message=msg, **base)
-    tree = cKDTree(P)
+    tree = KDTree(P)
     timings["tree"] = time.perf_counter() - t0
     tr = float("nan")
     if resolution:
         t1 = time.perf_counter()
-        d, _ = tree.query(P, k=2)
-        dd = d[:, 1]
+        _, _, dd = tree.nn(P, exclude_self=True)
         if not (dd > 0).all():  # duplicates: fall back to the distinct-point definition
             tr = mean_resolution(P)
         else:
@@ -513,32 +725,214 @@ def _point_information(
     return A, r2
 
 
-# --------------------------------------------------------------------------- small helpers
+# --------------------------------------------------------------------------- the fused ICP loop
 
 
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    th = float(np.linalg.norm(w))
+@njit(cache=True)
+def _rodrigues_nb(w: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Rotation matrix of the rotation vector ``w`` (plain loops)."""
+    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    K = np.zeros((3, 3))
     if th < 1e-12:
-        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+        K[0, 1], K[0, 2], K[1, 2] = -w[2], w[1], -w[0]
+        K[1, 0], K[2, 0], K[2, 1] = w[2], -w[1], w[0]
         return np.eye(3) + K
-    k = w / th
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(th) * K + (1.0 - math.cos(th)) * (K @ K)
+    k0, k1, k2 = w[0] / th, w[1] / th, w[2] / th
+    K[0, 1], K[0, 2], K[1, 2] = -k2, k1, -k0
+    K[1, 0], K[2, 0], K[2, 1] = k2, -k1, k0
+    sn, c1 = math.sin(th), 1.0 - math.cos(th)
+    R = np.eye(3)
+    for a in range(3):
+        for b in range(3):
+            kk = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
+            R[a, b] += sn * K[a, b] + c1 * kk
+    return R
 
 
-def _euler_zyx(w: np.ndarray) -> np.ndarray:
-    """Open3D's ``TransformVector6dToMatrix4d``: ``Rz(w2) · Ry(w1) · Rx(w0)``."""
+@njit(cache=True)
+def _euler_zyx(w: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Open3D's ``TransformVector6dToMatrix4d`` rotation: ``Rz(w2) · Ry(w1) · Rx(w0)``."""
     ca, sa = math.cos(w[0]), math.sin(w[0])
     cb, sb = math.cos(w[1]), math.sin(w[1])
     cg, sg = math.cos(w[2]), math.sin(w[2])
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-    Ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
-    Rz = np.array([[cg, -sg, 0.0], [sg, cg, 0.0], [0.0, 0.0, 1.0]])
-    return Rz @ Ry @ Rx
+    R = np.empty((3, 3))
+    R[0, 0] = cg * cb
+    R[0, 1] = cg * sb * sa - sg * ca
+    R[0, 2] = cg * sb * ca + sg * sa
+    R[1, 0] = sg * cb
+    R[1, 1] = sg * sb * sa + cg * ca
+    R[1, 2] = sg * sb * ca - cg * sa
+    R[2, 0] = -sb
+    R[2, 1] = cb * sa
+    R[2, 2] = cb * ca
+    return R
 
 
-def _rot_angle(R: np.ndarray) -> float:
-    return float(math.acos(min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))))
+@njit(cache=True)
+def _valid_pairs(
+    j: np.ndarray, d: np.ndarray, N: np.ndarray, has_normals: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Source indices, target indices and distances of the gated pairs (finite target normal)."""
+    m = j.shape[0]
+    si = np.empty(m, np.int64)
+    cnt = 0
+    for i in range(m):
+        if j[i] >= 0 and (not has_normals or np.isfinite(N[j[i], 0])):
+            si[cnt] = i
+            cnt += 1
+    si = si[:cnt]
+    ti = np.empty(cnt, np.int64)
+    dd = np.empty(cnt)
+    for k in range(cnt):
+        ti[k] = j[si[k]]
+        dd[k] = d[si[k]]
+    return si, ti, dd
+
+
+@njit(cache=True)
+def _reject_nb(d: np.ndarray, rule: int, factor: float) -> np.ndarray:  # pragma: no cover
+    """Numba twin of :func:`reject_outliers` (rule 0 none, 1 std, 2 x84)."""
+    keep = np.ones(d.shape[0], dtype=np.bool_)
+    if rule == 0 or d.shape[0] == 0:
+        return keep
+    if rule == 1:
+        lim = d.mean() + factor * d.std()
+        for i in range(d.shape[0]):
+            keep[i] = d[i] <= lim
+        return keep
+    med = np.median(d)
+    dev = np.abs(d - med)
+    mad = np.median(dev)
+    for i in range(d.shape[0]):
+        keep[i] = dev[i] <= factor * mad
+    return keep
+
+
+@njit(cache=True)
+def _icp_loop(
+    P: np.ndarray,
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    sdim: np.ndarray,
+    sval: np.ndarray,
+    Y: np.ndarray,
+    N: np.ndarray,
+    plane: bool,
+    T0: np.ndarray,
+    gate: float,
+    max_iter: int,
+    rule: int,
+    factor: float,
+    center: bool,
+    euler: bool,
+    o3d: bool,
+    rel_fit: float,
+    rel_rmse: float,
+    ttol: float,
+    rtol: float,
+    stop_window: int,
+    min_corr: int,
+):  # pragma: no cover - numba
+    """The whole ICP iteration (module docstring) in one compiled loop.
+
+    Returns ``(T, n_iter, status, converged, deficient, X, si, ti, d)`` with status 0 ok,
+    1 too few correspondences, 2 singular system; ``X, si, ti, d`` are the transformed source
+    and the gated pairs at the returned ``T`` (before the outlier rule).
+    """
+    n = P.shape[0]
+    T = T0.copy()
+    X, j, d = _kd_query(Pp, perm, sdim, sval, P, T, gate, False)
+    si, ti, dd = _valid_pairs(j, d, N, plane)
+    fit_prev = si.shape[0] / n
+    rmse_prev = math.sqrt(np.mean(dd**2)) if dd.shape[0] else 0.0
+    below = 0
+    converged = False
+    deficient = False
+    status = 0
+    n_iter = 0
+    for it in range(1, max_iter + 1):
+        keep = _reject_nb(dd, rule, factor)
+        sk = si[keep]
+        tk = ti[keep]
+        if sk.shape[0] < min_corr:
+            status = 1
+            break
+        if plane:
+            c = np.zeros(3)
+            if center:
+                for k in range(sk.shape[0]):
+                    for a in range(3):
+                        c[a] += X[sk[k], a]
+                c /= sk.shape[0]
+            JTJ, JTr, _ = _plane_system(X, Y, N, sk, tk, c)
+            w, V = _jacobi_eigh(JTJ)
+            wmax = w.max()
+            x = np.zeros(6)
+            if o3d:
+                det = 1.0
+                for a in range(6):
+                    det *= w[a]
+                if not abs(det) > 1e-6:  # Open3D: failed solve → identity update
+                    deficient = True
+                    wmax = -1.0
+            elif not wmax > 0.0:
+                status = 2
+                break
+            if wmax > 0.0:
+                for k in range(6):
+                    if w[k] > wmax * 1e-12 or (o3d and w[k] != 0.0):
+                        coef = 0.0
+                        for p in range(6):
+                            coef += V[p, k] * JTr[p]
+                        for p in range(6):
+                            x[p] -= V[p, k] * coef / w[k]
+                    else:
+                        deficient = True
+            R = _euler_zyx(x[:3]) if euler else _rodrigues_nb(x[:3])
+            inc = np.eye(4)
+            for a in range(3):
+                ta = c[a] + x[3 + a]
+                for b in range(3):
+                    inc[a, b] = R[a, b]
+                    ta -= R[a, b] * c[b]
+                inc[a, 3] = ta
+        else:
+            inc = _kabsch_pairs(X, Y, sk, tk)
+        T_old = T
+        T = np.eye(4)
+        for a in range(3):
+            for b in range(4):
+                T[a, b] = (
+                    inc[a, 0] * T_old[0, b] + inc[a, 1] * T_old[1, b] + inc[a, 2] * T_old[2, b]
+                )
+            T[a, 3] += inc[a, 3]
+        X, j, d = _kd_query(Pp, perm, sdim, sval, P, T, gate, False)
+        si, ti, dd = _valid_pairs(j, d, N, plane)
+        n_iter = it
+        if o3d:
+            fit = si.shape[0] / n
+            rmse = math.sqrt(np.mean(dd**2)) if dd.shape[0] else 0.0
+            if abs(fit - fit_prev) < rel_fit and abs(rmse - rmse_prev) < rel_rmse:
+                converged = True
+                break
+            fit_prev = fit
+            rmse_prev = rmse
+        else:
+            dt = 0.0
+            tr = 0.0
+            for a in range(3):
+                dt += (T[a, 3] - T_old[a, 3]) ** 2
+                for b in range(3):
+                    tr += T[a, b] * T_old[a, b]  # trace(R Rold^T)
+            cosang = min(1.0, max(-1.0, (tr - 1.0) / 2.0))
+            if math.sqrt(dt) < ttol and math.acos(cosang) < rtol:
+                below += 1
+            else:
+                below = 0
+            if below >= stop_window:
+                converged = True
+                break
+    return T, n_iter, status, converged, deficient, X, si, ti, dd
 
 
 def reject_outliers(
@@ -604,8 +998,6 @@ class ICP:
     degeneracy_ratio : float
         Final information matrix (rotations scaled by the cloud radius) with
         ``λmin/λmax`` below this → ``degenerate`` (e.g. point-to-plane on a single plane).
-    workers : int
-        Threads for the KD-tree queries (``-1``: all cores).
     """
 
     def __init__(
@@ -630,7 +1022,6 @@ class ICP:
         relative_rmse: float = 1e-6,
         min_points: int = 6,
         degeneracy_ratio: float = 1e-9,
-        workers: int = 1,
     ) -> None:
         if variant not in ("point", "plane", "x84"):
             raise ConfigError(f"ICP variant must be 'point', 'plane' or 'x84', got {variant!r}")
@@ -680,7 +1071,6 @@ class ICP:
         self.relative_rmse = float(relative_rmse)
         self.min_points = max(3, int(min_points))
         self.degeneracy_ratio = float(degeneracy_ratio)
-        self.workers = int(workers)
         if self.open3d_compatible or variant == "x84":
             self.rule = "none" if self.open3d_compatible else "x84"
         else:
@@ -808,49 +1198,6 @@ class ICP:
         return self._iterate(source, target, T0, gate, ttol, rtol, timings, info)
 
     # ------------------------------------------------------------------ core loop
-    def _correspond(
-        self, tree: cKDTree, X: np.ndarray, gate: float, normals: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        d, j = tree.query(X, k=1, distance_upper_bound=gate, workers=self.workers)
-        ok = np.isfinite(d)
-        if normals is not None:
-            ok[ok] = np.isfinite(normals[j[ok], 0])
-        src_idx = np.flatnonzero(ok)
-        return src_idx, j[src_idx].astype(np.int64), d[src_idx]
-
-    def _increment(
-        self, X: np.ndarray, target: PreparedCloud, si: np.ndarray, ti: np.ndarray
-    ) -> tuple[np.ndarray | None, bool]:
-        """Increment ``ΔT`` from the selected pairs; ``(None, _)`` when singular.
-
-        Second value: the system was rank-deficient (solved by pseudo-inverse).
-        """
-        if self.variant != "plane":
-            return _kabsch_pairs(X, target.points, si, ti), False
-        assert target.normals is not None
-        c = X[si].mean(axis=0) if self.center else np.zeros(3)
-        JTJ, JTr, _ = _plane_system(X, target.points, target.normals, si, ti, c)
-        deficient = False
-        if self.open3d_compatible:
-            if not abs(np.linalg.det(JTJ)) > 1e-6:
-                return np.eye(4), True
-            x = np.linalg.solve(JTJ, -JTr)
-        else:
-            w, V = np.linalg.eigh(JTJ)
-            if not (w[-1] > 0):
-                return None, True
-            keep = w > w[-1] * 1e-12
-            deficient = not keep.all()
-            x = -(V[:, keep] @ ((V[:, keep].T @ JTr) / w[keep]))
-        if self.rotation_update == "euler-zyx":
-            R = _euler_zyx(x[:3])
-        else:
-            R = _rodrigues(x[:3])
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = c + x[3:] - R @ c
-        return T, deficient
-
     def _iterate(
         self,
         source: PreparedCloud,
@@ -862,86 +1209,63 @@ class ICP:
         timings: dict[str, float],
         info: dict[str, Any],
     ) -> RegistrationResult:
-        assert target.tree is not None
+        tree = target.tree
+        assert tree is not None
         n_src = source.points.shape[0]
-        min_corr = 6 if self.variant == "plane" else 3
-        t_nn = t_solve = t_rej = 0.0
-        T = T0.copy()
+        plane = self.variant == "plane"
+        min_corr = 6 if plane else 3
+        rule = {"none": 0, "std": 1, "x84": 2}[self.rule]
+        factor = self.x84_factor if self.rule == "x84" else self.std_factor
+        N = target.normals if (plane and target.normals is not None) else np.zeros((0, 3))
         tc = time.perf_counter()
-        X = _transform(source.points, T)
-        si, ti, d = self._correspond(target.tree, X, gate, target.normals)
-        t_nn += time.perf_counter() - tc
-        fit_prev = si.size / n_src
-        rmse_prev = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
-        below = 0
-        converged = False
-        deficient = False
-        status, message = "ok", ""
-        it = 0
-        for it in range(1, self.max_iter + 1):
-            tc = time.perf_counter()
-            keep = reject_outliers(
-                d, self.rule, self.x84_factor if self.rule == "x84" else self.std_factor
-            )
-            t_rej += time.perf_counter() - tc
-            n_keep = int(keep.sum())
-            if n_keep < min_corr:
-                status = "failed"
-                message = (
-                    f"iteration {it}: {n_keep} correspondences within the gate "
-                    f"({gate:.4g} m; need {min_corr}) — initial guess too far or gate too small"
-                )
-                it -= 1
-                break
-            tc = time.perf_counter()
-            inc, defic = self._increment(X, target, si[keep], ti[keep])
-            t_solve += time.perf_counter() - tc
-            if inc is None:
-                status, message = "degenerate", f"iteration {it}: singular normal equations"
-                it -= 1
-                break
-            deficient |= defic
-            T_old = T
-            T = inc @ T
-            tc = time.perf_counter()
-            X = _transform(source.points, T)
-            si, ti, d = self._correspond(target.tree, X, gate, target.normals)
-            t_nn += time.perf_counter() - tc
-            if self.open3d_compatible:
-                fit = si.size / n_src
-                rmse = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
-                if (
-                    abs(fit - fit_prev) < self.relative_fitness
-                    and abs(rmse - rmse_prev) < self.relative_rmse
-                ):
-                    converged = True
-                    break
-                fit_prev, rmse_prev = fit, rmse
-            else:
-                dt = float(np.linalg.norm(T[:3, 3] - T_old[:3, 3]))
-                dr = _rot_angle(T[:3, :3] @ T_old[:3, :3].T)
-                below = below + 1 if (dt < ttol and dr < rtol) else 0
-                if below >= self.stop_window:
-                    converged = True
-                    break
+        T, it, code, converged, deficient, X, si, ti, d = _icp_loop(
+            source.points,
+            tree._Pp,
+            tree._perm,
+            tree._dim,
+            tree._val,
+            target.points,
+            np.ascontiguousarray(N),
+            plane,
+            np.ascontiguousarray(T0),
+            float(gate),
+            self.max_iter,
+            rule,
+            float(factor),
+            self.center,
+            self.rotation_update == "euler-zyx",
+            self.open3d_compatible,
+            self.relative_fitness,
+            self.relative_rmse,
+            float(ttol),
+            float(rtol),
+            self.stop_window,
+            min_corr,
+        )
+        timings["iterate"] = time.perf_counter() - tc
         info["n_iterations"] = int(it)
-        timings["nn"] = t_nn
-        timings["reject"] = t_rej
-        timings["solve"] = t_solve
-        if status != "ok":
-            info["T_estimate"] = T
-            return _failed(status, message, T0, timings, info)
+        info["T_estimate"] = T
+        if code == 1:
+            n_keep = int(reject_outliers(d, self.rule, factor).sum())
+            msg = (
+                f"iteration {it + 1}: {n_keep} correspondences within the gate "
+                f"({gate:.4g} m; need {min_corr}) — initial guess too far or gate too small"
+            )
+            return _failed("failed", msg, T0, timings, info)
+        if code == 2:
+            return _failed(
+                "degenerate", f"iteration {it + 1}: singular normal equations", T0, timings, info
+            )
         # final statistics at the returned estimate
         tc = time.perf_counter()
-        keep = reject_outliers(
-            d, self.rule, self.x84_factor if self.rule == "x84" else self.std_factor
-        )
+        keep = reject_outliers(d, self.rule, factor)
         si_k, ti_k, d_k = si[keep], ti[keep], d[keep]
         n_in = int(si_k.size)
         rmse = float(np.sqrt(np.mean(d_k**2))) if n_in else float("nan")
         cov, ratio = self._covariance(X, target, si_k, ti_k, source.radius)
-        timings["covariance"] = time.perf_counter() - tc
+        timings["evaluate"] = time.perf_counter() - tc
         info["information_ratio"] = ratio
+        status, message = "ok", ""
         if n_in < min_corr:
             status, message = "failed", f"{n_in} inliers at the final estimate (need {min_corr})"
         elif deficient or not (ratio > self.degeneracy_ratio):
@@ -950,7 +1274,6 @@ class ICP:
                 f"{self.name}: geometry does not constrain 6 DoF "
                 f"(information eigenvalue ratio {ratio:.3g})"
             )
-        info["T_estimate"] = T
         return RegistrationResult(
             T_target_source=T if status == "ok" else T0.copy(),
             covariance=cov,

@@ -57,6 +57,7 @@ from relnav.registration.icp import (
     _failed,
     _horn_rotation,
     _jacobi_eigh,
+    _rodrigues_nb,
     _total,
     _transform,
     check_init,
@@ -147,26 +148,6 @@ def _compose_left(R: np.ndarray, t: np.ndarray, T: np.ndarray) -> np.ndarray:
             out[a, b] = R[a, 0] * T[0, b] + R[a, 1] * T[1, b] + R[a, 2] * T[2, b]
         out[a, 3] += t[a]
     return out
-
-
-@njit(cache=True)
-def _rodrigues_nb(w: np.ndarray) -> np.ndarray:
-    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    K = np.zeros((3, 3))
-    if th < 1e-12:
-        K[0, 1], K[0, 2], K[1, 2] = -w[2], w[1], -w[0]
-        K[1, 0], K[2, 0], K[2, 1] = w[2], -w[1], w[0]
-        return np.eye(3) + K
-    k0, k1, k2 = w[0] / th, w[1] / th, w[2] / th
-    K[0, 1], K[0, 2], K[1, 2] = -k2, k1, -k0
-    K[1, 0], K[2, 0], K[2, 1] = k2, -k1, k0
-    s, c1 = math.sin(th), 1.0 - math.cos(th)
-    R = np.eye(3)
-    for a in range(3):
-        for b in range(3):
-            kk = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
-            R[a, b] += s * K[a, b] + c1 * kk
-    return R
 
 
 @njit(cache=True)
@@ -425,8 +406,6 @@ class SparseICP:
         Neighbours of the target's PCA normals (point-to-plane).
     min_points : int
         Clouds with fewer finite points are ``degenerate``.
-    workers : int
-        Threads of the KD-tree queries.
     """
 
     def __init__(
@@ -449,7 +428,6 @@ class SparseICP:
         inlier_factor: float = 3.0,
         normal_k: int = 10,
         min_points: int = 6,
-        workers: int = 1,
     ) -> None:
         if variant not in ("point", "plane"):
             raise ConfigError(f"Sparse ICP variant must be 'point' or 'plane', got {variant!r}")
@@ -486,7 +464,6 @@ class SparseICP:
         self.inlier_factor = float(inlier_factor)
         self.normal_k = int(normal_k)
         self.min_points = max(3, int(min_points))
-        self.workers = int(workers)
         self.name = f"sicp-{variant}" + (":paper" if thresholds == "paper" else "")
         # covariance / degeneracy helper (same definitions as the ICP family)
         self._icp = ICP("plane" if variant == "plane" else "point", min_points=self.min_points)
@@ -594,8 +571,8 @@ class SparseICP:
         status, message = "ok", ""
         for it in range(1, self.max_icp + 1):
             tc = time.perf_counter()
-            d, j = target.tree.query(Xs * L, k=1, distance_upper_bound=gate, workers=self.workers)
-            sel = np.isfinite(d)
+            _, j, d = target.tree.nn(source.points, gate, T=T)
+            sel = j >= 0
             if Nn is not None:
                 sel[sel] = np.isfinite(Nn[j[sel], 0])
             t_nn += time.perf_counter() - tc
@@ -664,9 +641,8 @@ class SparseICP:
             info["T_estimate"] = T
             return _failed(status, message, T0, timings, info)
         tc = time.perf_counter()
-        X = _transform(source.points, T)
-        d, j = target.tree.query(X, k=1, distance_upper_bound=gate, workers=self.workers)
-        used = np.isfinite(d)
+        X, j, d = target.tree.nn(source.points, gate, T=T)
+        used = j >= 0
         inl = used & (d <= inlier_d)
         if Nn is not None:
             inl[inl] = np.isfinite(Nn[j[inl], 0])

@@ -63,7 +63,6 @@ from relnav.registration.icp import (
     PreparedCloud,
     _failed,
     _total,
-    _transform,
     check_init,
     prepare_cloud,
 )
@@ -404,9 +403,8 @@ class Super4PCS:
                 T = rr.T_target_source
         tc = time.perf_counter()
         assert target.tree is not None
-        X = _transform(source.points, T)
-        d, _ = target.tree.query(X, k=1, distance_upper_bound=delta)
-        inl = np.isfinite(d)
+        X, j, d = target.tree.nn(source.points, delta, T=T)
+        inl = j >= 0
         n_in = int(inl.sum())
         rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if n_in else float("nan")
         timings["evaluate"] = time.perf_counter() - tc

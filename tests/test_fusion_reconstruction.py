@@ -1,0 +1,95 @@
+"""Contour model reconstruction and its per-frame pose observations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from relnav.errors import ConfigError, InputError
+from relnav.fusion.reconstruction import ContourModel, Observation
+from relnav.geometry.rotations import quat_to_matrix, rotation_angle, rotvec_to_matrix
+from relnav.geometry.se3 import from_rt, invert, transform_points
+
+
+def _satellite() -> trimesh.Trimesh:
+    tm = trimesh.transformations.translation_matrix
+    parts = [
+        trimesh.creation.box((1.0, 0.8, 0.6)),
+        trimesh.creation.box((0.02, 1.2, 0.4), transform=tm((0.2, 1.0, 0.0))),
+        trimesh.creation.box((0.3, 0.2, 0.25), transform=tm((0.25, -0.2, 0.42))),
+    ]
+    return trimesh.util.concatenate(parts)
+
+
+def _frames(n: int, step_deg: float = 15.0, seed: int = 0):
+    """Clouds of a spinning, drifting target in a static sensor frame and T_sensor_target."""
+    rng = np.random.default_rng(seed)
+    mesh = _satellite()
+    axis = np.array([0.2, -0.3, 1.0])
+    axis /= np.linalg.norm(axis)
+    clouds, poses = [], []
+    for k in range(n):
+        R = rotvec_to_matrix(axis * np.radians(step_deg * k))
+        T = from_rt(R, np.array([4.0, 0.01 * k, -0.005 * k]))  # T_sensor_target
+        body = trimesh.sample.sample_surface(mesh, 3000, seed=seed * 100 + k)[0]
+        pts = transform_points(T, body) + rng.normal(scale=0.002, size=(3000, 3))
+        clouds.append(pts)
+        poses.append(T)
+    return clouds, poses
+
+
+def test_observations_follow_the_target() -> None:
+    clouds, poses = _frames(6)
+    model = ContourModel(seed=0)
+    for k, cloud in enumerate(clouds):
+        obs = model.observe(cloud)
+        assert isinstance(obs, Observation)
+        position, quaternion, quality = obs  # the 3-tuple I2's tracker unpacks
+        T_true = poses[k] @ invert(poses[0])  # T_{S_k, M}
+        b = model.body_origin
+        if k == 0:
+            np.testing.assert_allclose(quaternion, [0, 0, 0, 1])
+            np.testing.assert_allclose(position, clouds[0].mean(axis=0))
+            assert quality == 1.0
+        R = quat_to_matrix(quaternion)
+        assert np.degrees(rotation_angle(R.T @ T_true[:3, :3])) < 1.0, k
+        assert np.linalg.norm(position - transform_points(T_true, b)) < 0.01, k
+        assert 0.5 < quality <= 1.0 and quaternion[3] >= 0
+        np.testing.assert_allclose(invert(model.T_model_frame), T_true, atol=0.02)
+    assert model.n_frames == 6
+    assert model.points.shape[0] > 3000
+    assert [h["accepted"] for h in model.history] == [True] * 6
+
+
+def test_rejected_frame_keeps_model_and_predicts() -> None:
+    clouds, _ = _frames(3)
+    model = ContourModel()
+    model.observe(clouds[0])
+    model.observe(clouds[1])
+    n = model.points.shape[0]
+    obs = model.observe(np.zeros((0, 3)))
+    assert obs.quality == 0.0
+    assert model.points.shape[0] == n and model.n_frames == 2
+    assert model.history[-1]["accepted"] is False
+    # unrelated junk far away is rejected too (registration cannot explain it)
+    junk = np.random.default_rng(1).uniform(-50, 50, (500, 3))
+    assert model.observe(junk).quality == 0.0
+    model.reset()
+    assert model.n_frames == 0 and model.body_origin is None
+
+
+def test_bad_input() -> None:
+    model = ContourModel()
+    with pytest.raises(InputError):
+        model.observe(np.zeros((10, 2)))
+    with pytest.raises(InputError):
+        model.observe(np.zeros((3, 3)))  # first frame too small
+    with pytest.raises(ConfigError):
+        ContourModel(voxel_size=-1.0)
+    with pytest.raises(ConfigError):
+        ContourModel(min_fitness=0.1, reject_fitness=0.5)
+    clouds, _ = _frames(1)
+    model.observe(clouds[0])
+    with pytest.raises(InputError):
+        model.observe(clouds[0], init=np.eye(3))

@@ -1,0 +1,264 @@
+"""Twistor UKF (Paper 2 Algorithm 1) and the quaternion EKF baseline (ALGORITHMS.md §G.6–G.7).
+
+Acceptance (simulated observations, seeded): a target spinning at 5°/s about z, 22.5° per frame
+(dt = 4.5 s), 60 frames, measurement noise = the filters' default model (1 cm, 1° per axis),
+ω unknown at start (ω₀ = 0). Errors are RMS over 20 Monte Carlo seeds × the frames after the
+first 20 ("after convergence").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from relnav.errors import ConfigError, InputError
+from relnav.fusion.dynamics import mean_motion
+from relnav.fusion.ekf import QuaternionEKF
+from relnav.fusion.tracker import Tracker, simulate_observations
+from relnav.fusion.ukf import MeasurementNoise, ProcessNoise, TwistorUKF, quat_delta
+from relnav.geometry.rotations import quat_multiply
+
+N_LEO = mean_motion(6_778_137.0)
+SEEDS = range(20)
+STEPS = 60
+SKIP = 20
+# rigid constant spin: (almost) no process noise, as in the truth
+Q_RIGID = ProcessNoise(position=1e-6, velocity=1e-7, attitude=1e-6, omega=1e-7)
+SCENARIOS = {
+    "n0": {"n_mean_motion": 0.0},
+    "leo": {
+        "n_mean_motion": N_LEO,
+        "lvlh_axes": "z,x,y",  # boresight along-track
+        "velocity0": (0.002, 0.0, 0.001),
+    },
+}
+
+
+def _monte_carlo(filt: str, scen: str, **filter_options: object) -> dict[str, np.ndarray]:
+    cfg = SCENARIOS[scen]
+    errs, nees = [], []
+    for seed in SEEDS:
+        times, obs, truth = simulate_observations(
+            STEPS,
+            4.5,
+            n_mean_motion=cfg["n_mean_motion"],  # type: ignore[arg-type]
+            lvlh_axes=cfg.get("lvlh_axes"),  # type: ignore[arg-type]
+            velocity0=cfg.get("velocity0", (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
+            seed=seed,
+        )
+        tr = Tracker(
+            filt,
+            n_mean_motion=cfg["n_mean_motion"],  # type: ignore[arg-type]
+            lvlh_axes=cfg.get("lvlh_axes"),
+            q=Q_RIGID,
+            **filter_options,
+        )
+        res = tr.run(times, obs, truth=truth)
+        e = res.errors()
+        errs.append(np.concatenate([e["position"], e["velocity"], e["attitude"], e["omega"]], 1))
+        nees.append(res.nees())
+    return {"err": np.array(errs), "nees": np.array(nees)}
+
+
+@pytest.fixture(scope="module")
+def mc() -> dict[tuple[str, str], dict[str, np.ndarray]]:
+    out = {}
+    for scen in SCENARIOS:
+        out[("ukf", scen)] = _monte_carlo("ukf", scen)
+        out[("ekf", scen)] = _monte_carlo("ekf", scen)
+    return out
+
+
+def _rms(err: np.ndarray, sl: slice) -> np.ndarray:
+    e = err[:, SKIP:, sl]
+    return np.sqrt(np.mean(e**2, axis=(0, 1)))
+
+
+@pytest.mark.parametrize("scen", list(SCENARIOS))
+def test_ukf_spin_accuracy_after_convergence(mc: dict, scen: str) -> None:
+    err = mc[("ukf", scen)]["err"]
+    att = np.degrees(_rms(err, slice(6, 9)))
+    w = np.degrees(_rms(err, slice(9, 12)))
+    pos = _rms(err, slice(0, 3))
+    vel = _rms(err, slice(3, 6))
+    print(f"\nUKF {scen}: attitude RMS {att} deg, ω RMS {w} deg/s, pos {pos} m, vel {vel} m/s")
+    assert np.all(att[:2] < 0.3), att
+    assert att[2] < 1.0, att
+    assert np.all(w < 0.1), w
+    # position/velocity: better than a single measurement (1 cm) thanks to the dynamics
+    assert np.all(pos < 0.01), pos
+    assert np.all(vel < 2e-4), vel
+
+
+@pytest.mark.parametrize("scen", list(SCENARIOS))
+def test_ukf_nees_within_chi_square_bounds(mc: dict, scen: str) -> None:
+    nees = mc[("ukf", scen)]["nees"][:, SKIP:]  # (20 seeds, 40 steps), 12 dof
+    n_runs = nees.shape[0]
+    lo, hi = chi2.ppf([0.025, 0.975], 12 * n_runs) / n_runs
+    avg = nees.mean(axis=0)  # average NEES over the runs, per step
+    inside = np.mean((avg >= lo) & (avg <= hi))
+    print(
+        f"\nUKF {scen}: ANEES {avg.mean():.2f} in [{lo:.2f}, {hi:.2f}], {inside:.0%} steps inside"
+    )
+    assert lo <= avg.mean() <= hi
+    assert inside >= 0.85
+
+
+def test_ukf_vs_ekf_yaw(mc: dict) -> None:
+    """Paper 2 claims a 30 % lower yaw error for the UKF than the quaternion EKF. With the same
+    noise model and a constant spin the two agree about the spin axis; the first-order EKF
+    Jacobian (I − [ω×]Δt at 22.5° per step) costs it accuracy about x and y instead."""
+    for scen in SCENARIOS:
+        u = np.degrees(_rms(mc[("ukf", scen)]["err"], slice(6, 9)))
+        e = np.degrees(_rms(mc[("ekf", scen)]["err"], slice(6, 9)))
+        ratio = u[2] / e[2]
+        print(f"\n{scen}: yaw RMS UKF {u[2]:.3f}°, EKF {e[2]:.3f}°, UKF/EKF = {ratio:.2f}")
+        assert 0.8 < ratio < 1.2
+        assert np.all(u[:2] < e[:2])
+
+
+def test_ekf_exact_jacobian_matches_ukf() -> None:
+    times, obs, truth = simulate_observations(40, 4.5, seed=7)
+    u = Tracker("ukf", q=Q_RIGID).run(times, obs, truth=truth).errors()["attitude"]
+    e = Tracker("ekf", q=Q_RIGID, jacobian="exact").run(times, obs, truth=truth)
+    e_att = e.errors()["attitude"]
+    ru = np.sqrt(np.mean(u[SKIP:] ** 2, 0))
+    re = np.sqrt(np.mean(e_att[SKIP:] ** 2, 0))
+    np.testing.assert_allclose(ru, re, rtol=0.15)
+
+
+def test_sigma_points_reproduce_mean_and_covariance(rng: np.random.Generator) -> None:
+    ukf = TwistorUKF(dt=4.5)
+    A = rng.normal(size=(15, 15))
+    ukf._P = A @ A.T + 0.1 * np.eye(15)  # any SPD covariance
+    chi = ukf.sigma_points()
+    assert chi.shape == (31, 15)
+    assert ukf.Wm.sum() == pytest.approx(1.0)
+    assert ukf.lam == pytest.approx(-12.0) and ukf.Wm[0] == pytest.approx(-4.0)  # κ = 3 − L
+    np.testing.assert_allclose(ukf.Wm @ chi, 0.0, atol=1e-12)
+    np.testing.assert_allclose((chi * ukf.Wc[:, None]).T @ chi, ukf._P, atol=1e-10)
+
+
+def test_predict_mean_follows_deterministic_motion() -> None:
+    w = np.radians([1.0, -2.0, 5.0])
+    q0 = np.array([0.1, -0.2, 0.3, 0.9])
+    q0 /= np.linalg.norm(q0)
+    f = TwistorUKF(
+        N_LEO,
+        dt=4.5,
+        q=ProcessNoise(0, 0, 0, 0),
+        p0={"position": 1e-7, "velocity": 1e-9, "attitude": 1e-7, "omega": 1e-9},
+        position0=[3.0, 1.0, 0.0],
+        velocity0=[0.01, 0.0, -0.002],
+        quat0=q0,
+        omega0=w,
+    )
+    for _ in range(10):
+        f.predict()
+    q = q0
+    for _ in range(10):
+        q = quat_multiply(q, quat_delta(w, 4.5))
+    np.testing.assert_allclose(f.quaternion, q * np.sign(q[3]), atol=1e-9)
+    p, v = f.dynamics.propagate(np.array([3.0, 1.0, 0.0]), np.array([0.01, 0.0, -0.002]), 45.0)
+    np.testing.assert_allclose(f.position, p, atol=1e-9)
+    np.testing.assert_allclose(f.velocity, v, atol=1e-11)
+    np.testing.assert_allclose(f.omega, w, atol=1e-12)
+    assert f.mean_iterations <= 10
+
+
+def test_cw_model_beats_double_integrator_in_leo() -> None:
+    """Truth follows CW in LEO; the filter with the right n tracks the position better."""
+    kw = {"lvlh_axes": "z,x,y", "velocity0": (0.01, 0.0, 0.0)}
+    times, obs, truth = simulate_observations(60, 20.0, n_mean_motion=N_LEO, seed=3, **kw)
+    rms = {}
+    for n in (N_LEO, 0.0):
+        tr = Tracker("ukf", n_mean_motion=n, lvlh_axes="z,x,y", q=Q_RIGID, velocity0=(0.01, 0, 0))
+        e = tr.run(times, obs, truth=truth).errors()["position"][SKIP:]
+        rms[n] = float(np.sqrt(np.mean(e**2)))
+    assert rms[N_LEO] < 0.5 * rms[0.0], rms
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"innovation": "twist"},
+        {"update_sigma": "propagated"},
+        {"covariance_update": "joseph"},
+        {"translation_model": "euler"},
+        {"kappa": 0.0},
+        {"alpha": 0.5, "kappa": 0.0},
+    ],
+)
+def test_ukf_variants_converge(options: dict) -> None:
+    times, obs, truth = simulate_observations(40, 4.5, seed=11)
+    res = Tracker("ukf", q=Q_RIGID, **options).run(times, obs, truth=truth)
+    s = res.summary(skip=SKIP)
+    assert np.all(np.array(s["attitude"]["rms"]) < 0.5), s["attitude"]
+    assert np.all(np.array(s["omega"]["rms"]) < 0.1), s["omega"]
+    P = res.covariance[-1]
+    np.testing.assert_allclose(P, P.T, atol=1e-15)
+    assert np.linalg.eigvalsh(P).min() > 0
+
+
+@pytest.mark.parametrize("cls", [TwistorUKF, QuaternionEKF])
+def test_bad_observation_is_rejected_not_applied(cls: type) -> None:
+    f = cls(dt=4.5, omega0=[0.0, 0.0, 0.087], gate_probability=0.999)
+    f.predict()
+    before = (f.position, f.quaternion, f.covariance)
+    for p, q in (
+        ([np.nan, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
+        ([0.0, 0.0, 0.0], [0.0, np.inf, 0.0, 1.0]),
+        ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]),
+        ([50.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),  # 50 m jump: fails the χ² gate
+    ):
+        info = f.update(p, q)
+        assert not info.accepted and info.message
+    np.testing.assert_array_equal(f.position, before[0])
+    np.testing.assert_array_equal(f.quaternion, before[1])
+    np.testing.assert_array_equal(f.covariance, before[2])
+    assert f.update([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]).accepted
+    info = f.update([0.0, 0.0, 0.0], [0, 0, 0, 1.0], R=np.full((6, 6), np.nan))
+    assert not info.accepted
+    with pytest.raises(InputError):
+        f.update([0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    with pytest.raises(InputError):
+        f.predict(-1.0)
+    with pytest.raises(InputError):
+        f.predict(math.nan)
+
+
+def test_bad_configuration() -> None:
+    with pytest.raises(ConfigError):
+        TwistorUKF(kappa=-16.0)  # L + λ ≤ 0
+    with pytest.raises(ConfigError):
+        TwistorUKF(alpha=0.0)
+    with pytest.raises(ConfigError):
+        TwistorUKF(innovation="euler")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError):
+        TwistorUKF(q={"attitud": 1e-3})
+    with pytest.raises(ConfigError):
+        TwistorUKF(r=np.eye(3))
+    with pytest.raises(ConfigError):
+        MeasurementNoise(position=-1.0)
+    with pytest.raises(ConfigError):
+        QuaternionEKF(jacobian="second-order")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError):
+        TwistorUKF(dt=0.0)
+    with pytest.raises(InputError):
+        TwistorUKF(quat0=[0.0, 0.0, 0.0, 0.0])
+
+
+def test_state_sigma_and_covariance_shapes() -> None:
+    u = TwistorUKF(dt=4.5)
+    e = QuaternionEKF(dt=4.5)
+    assert u.covariance.shape == (15, 15) and e.covariance.shape == (12, 12)
+    for f in (u, e):
+        s = f.state_sigma()
+        np.testing.assert_allclose(s["position"], 0.1)
+        np.testing.assert_allclose(s["attitude"], 0.4)
+        np.testing.assert_allclose(s["omega"], 0.1)
+        assert f.physical_covariance().shape == (12, 12)
+        assert f.nees([0, 0, 0], [0, 0, 0], [0, 0, 0, 1.0], [0, 0, 0]) == pytest.approx(0.0)
