@@ -20,6 +20,7 @@ from relnav.registration.icp import (
     _kabsch_pairs,
     _point_information,
     _reject_nb,
+    information_ratio,
     prepare_cloud,
     reject_outliers,
 )
@@ -416,3 +417,37 @@ def test_prepare_cloud_reports_dropped_and_status():
     assert c.normals is not None and np.isfinite(c.normals).all()
     assert np.isfinite(c.resolution) and c.resolution > 0
     assert prepare_cloud(np.ones((10, 3))).status == "degenerate"
+
+
+def test_information_ratio_is_origin_free(surface_pair):
+    """The degeneracy ratio does not change when the scene is 1 km from the sensor."""
+    src, tgt, _ = surface_pair
+    far = np.array([1000.0, -300.0, 50.0])
+    a = get_registration("icp-plane").register(src, tgt)
+    b = get_registration("icp-plane").register(src + far, tgt + far)
+    assert a.info["information_ratio"] > 1e-3
+    # (not bit-identical: normals and the ICP path see rounding of 1 km coordinates)
+    assert b.info["information_ratio"] == pytest.approx(a.info["information_ratio"], rel=2e-2)
+    assert information_ratio(np.eye(6), np.zeros(3), 1.0) == 1.0
+
+
+@pytest.mark.parametrize("method", ["icp-point", "icp-plane"])
+def test_odometry_with_prepared_clouds(method):
+    """Odometry reuses prepared clouds and the motion prior; the chained poses follow truth."""
+    from relnav.odometry import Odometry
+
+    sim_targets = pytest.importorskip("relnav.sim.targets")
+    sim_sensors = pytest.importorskip("relnav.sim.sensors")
+    rng = np.random.default_rng(0)
+    tg = sim_targets.get_target("voyager")
+    sensor = sim_sensors.make_sensor("surface-hpr")
+    T = look_at(np.array([3.0, 0.5, 1.0]) * tg.extent)
+    step = exp_se3(np.r_[0.0, 0.02 * tg.extent, 0.0, 0.0, 0.0, np.deg2rad(2.0)])
+    gt_poses, odo = [], Odometry(method, initial_pose=T)
+    for _ in range(5):
+        gt_poses.append(T)
+        out = odo.register_frame(sensor.scan(tg, T, rng))
+        T = step @ T
+    assert out.status == "ok" and not out.used_prior
+    rot, disp = errors(gt_poses[-1], out.pose, np.zeros((1, 3)))
+    assert rot < 2.0 and disp < 0.03 * tg.extent, (rot, disp / tg.extent)

@@ -94,25 +94,25 @@ def test_registry_and_options():
 
 
 def test_recovers_large_rotation_of_the_same_object():
-    """Two samplings of one object 120° apart: recovered to the sampling accuracy."""
+    """Two samplings of one object 120° apart: recovered to the sampling accuracy, then
+    tightened by the optional ICP refinement (the raw estimate is kept in ``info``)."""
     rng = np.random.default_rng(4)
-    tgt = box_cloud(3000, rng)
+    tgt = box_cloud(1500, rng)
     gt = motion(rng, 120.0, 1.0)
-    src = transform_points(invert(gt), box_cloud(3000, rng))
-    res = get_registration("s4pcs").register(src, tgt)
+    src = transform_points(invert(gt), box_cloud(1500, rng))
+    res = get_registration("s4pcs", refine="icp-plane").register(src, tgt)
     assert res.ok, res.message
-    rot, disp = errors(gt, res.T_target_source, src)
-    assert rot < 3.0 and disp < res.info["delta"], (rot, disp)
-    assert res.info["lcp"] > 0.5 and res.fitness > 0.5
-    # refinement with ICP from the global estimate tightens it
-    ref = get_registration("s4pcs", refine="icp-plane").register(src, tgt)
-    rot_r, disp_r = errors(gt, ref.T_target_source, src)
-    assert ref.ok and rot_r < 0.5 and disp_r < 0.2 * disp + 0.005
+    rot, disp = errors(gt, res.info["T_s4pcs"], src)
+    assert rot < 5.0 and disp < res.info["delta"], (rot, disp)
+    assert res.info["lcp"] > 0.5
+    rot_r, disp_r = errors(gt, res.T_target_source, src)
+    assert res.info["refine_status"] == "ok" and rot_r < 0.5 and disp_r < 0.2 * disp + 0.005
+    assert res.fitness > 0.8
 
 
 def test_large_motion_on_satellite_scans_success_rate(voyager_pairs):
     """≥ 45° between two Voyager scans: recovered (rot < 5°, RMS error < 5 % of size) in most
-    of 10 seeds. Measured: 9/10 (the failure has no congruent set: the views overlap little)."""
+    of 10 seeds. Measured: 9/10 (seed 1 locks onto a wrong 44° alignment: little overlap)."""
     ok = 0
     for seed, (src, tgt, gt, extent) in enumerate(voyager_pairs):
         res = get_registration("s4pcs", seed=seed).register(src, tgt)

@@ -130,6 +130,51 @@ def _greedy_clusters(bits: np.ndarray, min_size: int, pcl_bug: bool):
     return sizes[:n_clusters].copy(), members[:n_members].copy()
 
 
+@njit(cache=True)
+def _best_cluster_all_seeds(bits: np.ndarray, min_size: int) -> np.ndarray:
+    """Largest greedy cluster over EVERY seed (members may be shared between seeds).
+
+    For each seed ``i`` (ascending sorted position) the cluster is grown exactly as in
+    :func:`_greedy_clusters`, but no correspondence is ever marked as taken, so a wrong
+    early seed can no longer claim (and split) the true cluster. Returns the members of the
+    largest cluster (first found on ties), empty if none exceeds ``min_size``.
+    """
+    n, W = bits.shape
+    mask = np.empty(W, dtype=np.uint64)
+    cur = np.empty(n, dtype=np.int64)
+    best = np.empty(n, dtype=np.int64)
+    best_size = 0
+    one = np.uint64(1)
+    for i in range(n):
+        for w in range(W):
+            mask[w] = bits[i, w]
+        cur[0] = i
+        size = 1
+        for w in range(W):
+            x = mask[w]
+            if x == 0:
+                continue
+            lo = w * 64
+            for b in range(64):
+                if (x >> np.uint64(b)) & one:
+                    j = lo + b
+                    if j == i:
+                        continue
+                    cur[size] = j
+                    size += 1
+                    for v in range(w, W):
+                        mask[v] &= bits[j, v]
+                    x = mask[w]
+                    if b == 63 or (x >> np.uint64(b + 1)) == 0:
+                        break
+        if size > best_size:
+            best_size = size
+            best[:size] = cur[:size]
+    if best_size <= min_size:
+        return np.empty(0, dtype=np.int64)
+    return best[:best_size].copy()
+
+
 def consistency_bitset(
     src_pts: np.ndarray, tgt_pts: np.ndarray, *, epsilon: float, strict: bool = False
 ) -> np.ndarray:
@@ -194,6 +239,7 @@ def geometric_consistency_grouping(
     min_cluster_size: int = 3,
     pcl_bug: bool = False,
     strict: bool = False,
+    seeds: str = "untaken",
 ) -> tuple[Correspondences, list[np.ndarray]]:
     """Largest geometrically consistent cluster of correspondences (ALGORITHMS §B.2).
 
@@ -216,6 +262,13 @@ def geometric_consistency_grouping(
     strict : bool
         Accept ``|Δ| < ε`` (Paper 1 eq. 7 as printed) instead of PCL's ``|Δ| ≤ ε`` (default)
         **[interpretation: PCL's comparison]**.
+    seeds : {"untaken", "all"}
+        ``"untaken"`` (default, Chen & Bhanu / PCL): members of a kept cluster are taken and
+        never seed or join another cluster. ``"all"`` (a relnav extension): every
+        correspondence seeds a cluster and nothing is taken, so the largest cluster is the
+        largest greedy consistent set found from any seed; it fixes the failure where a wrong
+        early seed claims part of the true cluster and splits it. ``clusters`` then holds only
+        the largest one. Cost ``O(n²·W)`` bit operations (``W = n/64``).
 
     Returns
     -------
@@ -248,12 +301,21 @@ def geometric_consistency_grouping(
     eps = _check_epsilon(epsilon, who)
     if int(min_cluster_size) != min_cluster_size or min_cluster_size < 0:
         raise ConfigError(f"{who}: min_cluster_size must be an integer >= 0")
+    if seeds not in ("untaken", "all"):
+        raise ConfigError(f"{who}: seeds must be 'untaken' or 'all', got {seeds!r}")
+    if seeds == "all" and pcl_bug:
+        raise ConfigError(f"{who}: pcl_bug applies to seeds='untaken' only")
     sc = corr.sorted_by_distance()
     s, m = _gather_points(src_pts, tgt_pts, sc, who)
     n = len(sc)
     if n <= min_cluster_size:
         return Correspondences.empty(), []
     bits = _consistency_bits(s, m, eps, bool(strict))
+    if seeds == "all":
+        best_members = _best_cluster_all_seeds(bits, int(min_cluster_size))
+        if best_members.size == 0:
+            return Correspondences.empty(), []
+        return sc.subset(best_members), [best_members]
     sizes, members = _greedy_clusters(bits, int(min_cluster_size), bool(pcl_bug))
     if sizes.size == 0:
         logger.debug("GCC: no cluster larger than %d among %d", min_cluster_size, n)

@@ -136,12 +136,13 @@ class GccGrouper(_Tolerance):
     """GCC (ALGORITHMS §B.2): :func:`~relnav.matching.gcc.geometric_consistency_grouping`.
 
     Options: ``epsilon`` / ``epsilon_factor`` (ε), ``min_cluster_size`` (3), ``pcl_bug``,
-    ``strict`` — see that function.
+    ``strict``, ``seeds`` ("untaken" | "all") — see that function.
     """
 
     min_cluster_size: int = 3
     pcl_bug: bool = False
     strict: bool = False
+    seeds: str = "untaken"
     info: dict[str, Any] = field(default_factory=dict, init=False)
 
     def __post_init__(self) -> None:
@@ -157,6 +158,7 @@ class GccGrouper(_Tolerance):
             "min_cluster_size": self.min_cluster_size,
             "pcl_bug": self.pcl_bug,
             "strict": self.strict,
+            "seeds": self.seeds,
         }
 
     def select(

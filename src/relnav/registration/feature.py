@@ -13,6 +13,9 @@ Pipeline for a pair (source = scan ``k+1``, target = scan ``k``), ALGORITHMS §0
 4. Descriptors of both clouds; exact NN matching on unit-normalised descriptors with gate ``τ``.
 5. Grouping (GCC with ``ε = 2·Tr`` by default) → correspondences Ω.
 6. Estimator (recursive filter or SVD) → ``T_target_source``.
+7. Optional (a relnav extension, off by default): ``refine="icp-plane"`` (any registration
+   method string) refines the estimate on the full clouds, starting from it; a refinement
+   that is not ``ok`` leaves the feature estimate in place.
 
 **[interpretation] radius per cloud.** Paper 1 computes ``Tr`` on ``P_{k+1}`` and uses it for both
 clouds. By default (``radius_from="own"``) each cloud uses its own ``Tr``, which lets odometry
@@ -102,6 +105,9 @@ class FeatureRegistration:
         Clouds with fewer finite points are ``degenerate``.
     descriptor_options, grouper_options, estimator_options : dict, optional
         Passed to the descriptor function, the grouper and the estimator.
+    refine : str, optional
+        Registration method run after the estimator, initialised with its result (e.g.
+        ``"icp-plane"``); ``refine_options`` are passed to it.
     """
 
     def __init__(
@@ -121,6 +127,8 @@ class FeatureRegistration:
         descriptor_options: dict[str, Any] | None = None,
         grouper_options: dict[str, Any] | None = None,
         estimator_options: dict[str, Any] | None = None,
+        refine: str | None = None,
+        refine_options: dict[str, Any] | None = None,
     ) -> None:
         from relnav.estimation import get_estimator
         from relnav.matching.grouping import get_grouper
@@ -139,6 +147,11 @@ class FeatureRegistration:
         self.radius_from = radius_from
         self.min_points = int(min_points)
         self.descriptor_options = dict(descriptor_options or {})
+        self.refiner = None
+        if refine:
+            from relnav.registration.base import get_registration
+
+            self.refiner = get_registration(refine, **(refine_options or {}))
         self.name = f"feature:{descriptor}+{grouper}+{estimator}"
 
     # ------------------------------------------------------------------ per-cloud work
@@ -241,15 +254,23 @@ class FeatureRegistration:
         timings["estimate"] = time.perf_counter() - t0
         info.update(est.info)
         info["n_grouped"] = len(grouped)
+        message = "" if est.status == "ok" else str(est.info.get("message", est.status))
+        T, cov = est.T_target_source, est.covariance
+        if self.refiner is not None and est.status == "ok":
+            t0 = time.perf_counter()
+            ref = self.refiner.register(source.points, target.points, init=T)
+            timings["refine"] = time.perf_counter() - t0
+            info["refine_status"] = ref.status
+            if ref.status == "ok":
+                T, cov = ref.T_target_source, ref.covariance
         rmse = float("nan")
         if len(grouped) and est.status == "ok":
-            moved = transform_points(est.T_target_source, source.points[grouped.src_idx])
+            moved = transform_points(T, source.points[grouped.src_idx])
             res = np.linalg.norm(moved - target.points[grouped.tgt_idx], axis=1)
             rmse = float(np.sqrt(np.mean(res**2)))
-        message = "" if est.status == "ok" else str(est.info.get("message", est.status))
         return RegistrationResult(
-            T_target_source=est.T_target_source,
-            covariance=est.covariance,
+            T_target_source=T,
+            covariance=cov,
             fitness=len(grouped) / max(len(corr), 1),
             inlier_rmse=rmse,
             n_correspondences=len(corr),

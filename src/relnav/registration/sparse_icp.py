@@ -35,7 +35,9 @@ estimate; ``n_inliers`` = pairs closer than ``inlier_distance`` (``inlier_factor
 3 Tr by default, paper mode 0.01 m); ``fitness = n_inliers / N_source``;
 ``inlier_rmse`` over those; ``covariance`` as :mod:`relnav.registration.icp` (left
 perturbation ``[ρ, φ]`` in the target frame, from the inliers). ``converged`` is OpenGP's
-``max|X − X_prev| < stop`` between ICP iterations.
+``max|X − X_prev| < stop`` between ICP iterations. ``timings``: ``prepare`` (KD-tree,
+resolution, normals), ``nn`` (nearest neighbours), ``solve`` (the ADMM rounds, numba),
+``covariance``; ``info["n_rigid_fits"]`` counts the rigid fits.
 """
 
 from __future__ import annotations

@@ -42,7 +42,9 @@ clouds from the Super4PCS pose.
 after alignment (``= n_inliers / N``); ``inlier_rmse`` over them; ``n_correspondences =
 n_inliers``; ``info["lcp"]`` = best sampled LCP score, ``info["n_bases"]``,
 ``info["n_candidates"]``, ``info["seed"]``. ``converged`` = a set scoring ≥
-``terminate_threshold`` was found. No congruent set at all → ``failed``.
+``terminate_threshold`` was found. No congruent set at all → ``failed``. ``timings``:
+``prepare``, ``sample`` (sampling + distance matrices), ``base``, ``congruent``, ``verify``,
+``refine`` (when used), ``evaluate``. The raw Super4PCS pose is ``info["T_s4pcs"]``.
 """
 
 from __future__ import annotations

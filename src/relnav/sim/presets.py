@@ -246,7 +246,7 @@ _PRESETS: dict[str, tuple[Callable[..., dict[str, Any]], int, tuple[str, ...]]] 
     "sim-eoi": (_sim_eoi, 200, ()),
     "sim-helical": (_sim_helical, 150, ()),
     "sim-voyager": (_orbit_25({"name": "voyager"}, 332, "Sim-Voyager"), 250, ()),
-    "sim-orion": (_orbit_25({"name": "capsule"}, 312, "Sim-Orion"), 250, ()),
+    "sim-orion": (_orbit_25({"name": "capsule"}, 335, "Sim-Orion"), 250, ()),
     "sim-bennu": (
         _orbit_25({"name": "asteroid", "scale_to": 10.0}, 150, "Sim-Bennu"),
         250,

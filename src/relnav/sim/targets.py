@@ -3,7 +3,9 @@
 Every :class:`Target` mesh is expressed in the **target frame**: origin at the centre of the
 mesh's axis-aligned bounding box, metres. Procedural targets are built from primitives
 (boxes, cylinders, surfaces of revolution) that are concatenated, not merged by boolean
-operations, so they are not watertight; ray casting and surface sampling do not need it.
+operations, so the whole mesh is not one closed surface (the capsule's parts are each closed;
+the asteroid's boulders are open below the surface); ray casting and surface sampling do not
+need it.
 
 Procedural targets (``procedural_target``; the axes are the target frame's):
 
@@ -16,12 +18,16 @@ envisat    Envisat-like: 10 m box bus along x, one 14 m × 5 m solar wing on a b
 iridium    Iridium/Globalstar-2-like: 1.5 × 1.5 × 2.2 m bus, two 3.2 m × 1.6 m wings along
            ±y on yokes, nadir antenna panel and rods; ≈ 8.7 m span (y).
 capsule    Orion-like crew module about z: 5.0 m heat-shield dish (spherical cap, R = 6 m),
-           32.5° truncated cone, docking tunnel, asymmetric RCS pods and a hatch; ≈ 5.0 m
-           diameter, ≈ 3.3 m tall.
+           32.5° truncated cone, docking tunnel with a docking ring and an off-axis hatch,
+           four windows recessed on the side hatch's side, six RCS pods at uneven azimuths,
+           a forward-bay-cover ridge (partial ring), an umbilical fairing and heat-shield
+           pads, so it is NOT rotationally symmetric; ≈ 5.0 m diameter, ≈ 3.3 m tall.
 voyager    Voyager-like probe: decagonal bus, 3.66 m paraboloid dish with feed, RTG boom
            with three RTGs, science boom with scan platform, magnetometer boom; ≈ 12 m.
-asteroid   Seeded smooth perturbed ellipsoid with a Bennu-like equatorial ridge, optional
-           craters (``craters=N``); longest extent 500 m unless ``scale_to`` is given.
+asteroid   Seeded Bennu-like rubble pile: spinning-top ellipsoid with an equatorial ridge, a
+           flat facet, 15–25 craters and 30–60 boulders (counts seeded; ``craters=N``,
+           ``boulders=N``, ``top_shape``, ``facet_depth``, ... override); longest extent
+           500 m unless ``scale_to`` is given.
 ========== ==================================================================================
 
 Aliases: ``bennu`` → asteroid, ``orion`` → capsule, ``globalstar`` → iridium.
@@ -41,6 +47,7 @@ import numpy as np
 import trimesh
 
 from relnav.errors import ConfigError, InputError
+from relnav.geometry.rotations import random_rotation
 
 __all__ = [
     "TARGET_ALIASES",
@@ -289,39 +296,195 @@ def _iridium(rng: np.random.Generator, *, max_edge: float = 0.2) -> trimesh.Trim
     return _assemble(parts, max_edge)
 
 
+def _revolved_grid(prof: np.ndarray, az: np.ndarray) -> np.ndarray:
+    """(M, K, 3) grid of the profile ``(r, z)`` (M, 2) revolved about +z at azimuths ``az``."""
+    r, z = prof[:, 0][:, None], prof[:, 1][:, None]
+    c, s = np.cos(az)[None, :], np.sin(az)[None, :]
+    return np.stack([r * c, r * s, np.broadcast_to(z, (len(prof), len(az)))], axis=-1)
+
+
+def _grid_mesh(P: np.ndarray, *, wrap: bool, cap: bool = False) -> trimesh.Trimesh:
+    """Triangulate a (M, K, 3) grid (rows: profile points, columns: azimuths).
+
+    Rows whose points coincide (profile points on the axis) collapse to one vertex.
+    ``wrap`` joins the last column to the first (full revolution). ``cap`` closes the first and
+    last columns with triangle fans; it expects a convex closed profile whose last row repeats
+    the first. The faces are oriented outwards for a counter-clockwise ``(r, z)`` profile and
+    flipped if the (closed) result has a negative signed volume.
+    """
+    M, K = P.shape[:2]
+    idx = np.arange(M * K).reshape(M, K)
+    for i in range(M):
+        if np.ptp(P[i], axis=0).max() < 1e-12:
+            idx[i] = idx[i, 0]
+    cur = np.arange(K) if wrap else np.arange(K - 1)
+    nxt = (cur + 1) % K
+    a, b = idx[:-1][:, cur], idx[:-1][:, nxt]
+    c, d = idx[1:][:, nxt], idx[1:][:, cur]
+    faces = [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    if cap:
+        for j, flip in ((0, False), (K - 1, True)):
+            ring = idx[:-1, j]
+            fan = np.stack([np.full(len(ring) - 2, ring[0]), ring[1:-1], ring[2:]], -1)
+            faces.append(fan[:, ::-1] if flip else fan)
+    F = np.concatenate(faces)
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    mesh = trimesh.Trimesh(P.reshape(-1, 3).copy(), F, process=False)
+    mesh.remove_unreferenced_vertices()
+    V = mesh.vertices
+    signed = np.einsum(
+        "ij,ij->", V[mesh.faces[:, 0]], np.cross(*V[mesh.faces[:, 1:]].swapaxes(0, 1))
+    )
+    if signed < 0:
+        mesh.invert()
+    return mesh
+
+
 def _capsule(rng: np.random.Generator, *, max_edge: float = 0.3) -> trimesh.Trimesh:
-    r_base, r_shield = 2.5, 6.0
+    """Orion-like crew module, axis +z, heat shield at the bottom (deterministic; no ``rng``).
+
+    Parts (all closed, concatenated): the body of revolution (spherical-cap heat shield
+    R = 6 m, 5.0 m base, 32.5° cone 2.3 m high, 1.6 m docking tunnel 0.35 m high) with four
+    windows recessed 7 cm into the cone on the hatch side (azimuths 118°, 136°, 184°, 202°);
+    a docking ring on the tunnel and an off-axis hatch inside it; a side hatch (az 160°); six
+    RCS pods at uneven azimuths and heights; a forward-bay-cover ridge around the upper cone,
+    interrupted over az −25°..25°; an umbilical fairing along the cone at az 300°; three
+    heat-shield compression pads at uneven azimuths (40°, 165°, 290°).
+    Overall ≈ 5.0 m diameter, ≈ 3.3 m tall.
+    """
+    r_base, r_shield, cone_h = 2.5, 6.0, 2.3
+    alpha = math.radians(32.5)  # cone half-angle (side wall to the axis), as on Orion
+    tan_a = math.tan(alpha)
     depth = r_shield - math.sqrt(r_shield**2 - r_base**2)  # heat-shield cap depth
-    cone_h = 2.3
-    r_top = r_base - cone_h * math.tan(math.radians(32.5))
-    tunnel_r, tunnel_h = 0.8, 0.45
+    tunnel_r, tunnel_h = 0.8, 0.35
+    top = cone_h + tunnel_h
+
+    def r_cone(z: float) -> float:
+        return r_base - z * tan_a
+
+    def frame(az_deg: float, z: float) -> np.ndarray:
+        """Cone-surface frame: x outward normal, y tangential (+az), z up the generatrix."""
+        az = math.radians(az_deg)
+        n = np.array(
+            [math.cos(alpha) * math.cos(az), math.cos(alpha) * math.sin(az), math.sin(alpha)]
+        )
+        t = np.array([-math.sin(az), math.cos(az), 0.0])
+        T = np.eye(4)
+        T[:3, :3] = np.column_stack([n, t, np.cross(n, t)])
+        T[:3, 3] = [r_cone(z) * math.cos(az), r_cone(z) * math.sin(az), z]
+        return T
+
+    def on_cone(
+        az_deg: float, z: float, size: tuple[float, float, float], proud: float
+    ) -> trimesh.Trimesh:
+        """Box (normal, tangential, along-generatrix sizes) standing ``proud`` m off the cone."""
+        T = frame(az_deg, z) @ trimesh.transformations.translation_matrix(
+            [proud - 0.5 * size[0], 0.0, 0.0]
+        )
+        return trimesh.creation.box(extents=size, transform=T)
+
+    # ---- body of revolution, with profile rows and azimuth columns at the window edges
+    win_az = (118.0, 136.0, 184.0, 202.0)
+    win_w, win_z, win_depth, eps = 0.42, (1.0, 1.35), 0.07, 0.02
     a = np.linspace(0.0, math.asin(r_base / r_shield), 10)
     shield = np.column_stack([r_shield * np.sin(a), -depth + r_shield * (1 - np.cos(a))])
-    prof = np.vstack(
+    cone_z = np.array([0.0, win_z[0], win_z[0] + eps, win_z[1] - eps, win_z[1], cone_h])
+    cone = np.column_stack([r_base - cone_z * tan_a, cone_z])
+    prof = np.vstack([shield, cone[1:], [[tunnel_r, cone_h], [tunnel_r, top], [0.0, top]]])
+    r_win = r_cone(0.5 * sum(win_z))
+    half = math.degrees(0.5 * win_w / r_win)
+    d_eps = math.degrees(eps / r_win)
+    edges = np.array([[c - half, c - half + d_eps, c + half - d_eps, c + half] for c in win_az])
+    base = np.arange(0.0, 360.0, 5.0)
+    base = base[np.abs(base[:, None] - edges.ravel()[None, :]).min(axis=1) > 1.0]
+    az_deg = np.sort(np.concatenate([base, edges.ravel()]))
+    P = _revolved_grid(prof, np.radians(az_deg))
+    rows = np.flatnonzero(
+        (prof[:, 1] >= win_z[0] + eps - 1e-9) & (prof[:, 1] <= win_z[1] - eps + 1e-9)
+    )
+    rows = rows[(prof[rows, 0] > tunnel_r + 1e-9)]  # cone rows only
+    for e in edges:
+        cols = np.flatnonzero((az_deg >= e[1] - 1e-9) & (az_deg <= e[2] + 1e-9))
+        th = np.radians(az_deg[cols])
+        n = np.column_stack(
+            [
+                math.cos(alpha) * np.cos(th),
+                math.cos(alpha) * np.sin(th),
+                np.full(len(th), math.sin(alpha)),
+            ]
+        )
+        P[np.ix_(rows, cols)] -= win_depth * n[None, :, :]
+    body = _grid_mesh(P, wrap=True)
+
+    # ---- docking ring and off-axis hatch on top of the tunnel
+    ring_prof = np.array(
+        [[0.55, top - 0.01], [0.8, top - 0.01], [0.8, top + 0.11], [0.55, top + 0.11]]
+    )
+    ring = _grid_mesh(
+        _revolved_grid(
+            np.vstack([ring_prof, ring_prof[:1]]), np.radians(np.arange(0.0, 360.0, 7.5))
+        ),
+        wrap=True,
+    )
+    top_hatch = trimesh.creation.cylinder(
+        radius=0.28,
+        height=0.08,
+        sections=24,
+        transform=trimesh.transformations.translation_matrix([0.2, -0.1, top + 0.03]),
+    )
+
+    # ---- forward-bay-cover ridge: a partial ring hugging the upper cone
+    z0, z1 = 1.92, 2.02
+    ridge_prof = np.array(
         [
-            shield,
-            [[r_base, 0.0], [r_top, cone_h], [tunnel_r, cone_h]],
-            [[tunnel_r, cone_h + tunnel_h], [0.0, cone_h + tunnel_h]],
+            [r_cone(z0) - 0.04, z0],
+            [r_cone(z0) + 0.08, z0],
+            [r_cone(z1) + 0.08, z1],
+            [r_cone(z1) - 0.04, z1],
+            [r_cone(z0) - 0.04, z0],
         ]
     )
-    body = trimesh.creation.revolve(prof, sections=72)
-    tan_c = math.tan(math.radians(32.5))
+    ridge = _grid_mesh(
+        _revolved_grid(ridge_prof, np.radians(np.linspace(25.0, 335.0, 63))), wrap=False, cap=True
+    )
 
-    def on_cone(az_deg: float, z: float, size: tuple[float, float, float]) -> trimesh.Trimesh:
+    # ---- umbilical fairing: a half-buried cylinder along the cone generatrix
+    fairing = trimesh.creation.cylinder(
+        radius=0.18,
+        height=1.0 / math.cos(alpha),
+        sections=16,
+        transform=frame(300.0, 0.95) @ trimesh.transformations.translation_matrix([0.06, 0, 0]),
+    )
+
+    def on_shield(az_deg: float, rho: float, size: tuple[float, float, float]) -> trimesh.Trimesh:
+        """Box on the heat shield at radius ``rho``, aligned with the sphere's outward normal."""
         az = math.radians(az_deg)
-        r = r_base - z * tan_c
-        T = trimesh.transformations.rotation_matrix(az, [0, 0, 1])
-        T = T @ trimesh.transformations.translation_matrix([r - 0.5 * size[0] + 0.12, 0, z])
-        T = T @ trimesh.transformations.rotation_matrix(math.radians(-32.5), [0, 1, 0])
+        c = np.array([0.0, 0.0, r_shield - depth])  # centre of the heat-shield sphere
+        p = np.array(
+            [rho * math.cos(az), rho * math.sin(az), c[2] - math.sqrt(r_shield**2 - rho**2)]
+        )
+        T = _axis_transform(p, p - c)
+        T = T @ trimesh.transformations.translation_matrix([0.0, 0.0, 0.5 * size[2] - 0.04])
         return trimesh.creation.box(extents=size, transform=T)
 
     parts = [
         body,
-        on_cone(20.0, 1.6, (0.35, 0.5, 0.4)),  # RCS pods, deliberately uneven
-        on_cone(115.0, 1.4, (0.35, 0.4, 0.35)),
-        on_cone(200.0, 1.7, (0.35, 0.6, 0.45)),
-        on_cone(290.0, 1.2, (0.35, 0.4, 0.3)),
-        on_cone(160.0, 0.6, (0.3, 1.0, 0.8)),  # hatch
+        # heat-shield attachment: three compression pads at uneven azimuths
+        on_shield(40.0, 1.95, (0.35, 0.3, 0.1)),
+        on_shield(165.0, 2.05, (0.3, 0.3, 0.1)),
+        on_shield(290.0, 1.9, (0.4, 0.3, 0.1)),
+        ring,
+        top_hatch,
+        ridge,
+        fairing,
+        on_cone(160.0, 0.6, (0.3, 1.0, 0.8), 0.08),  # side (crew) hatch
+        # RCS thruster pods at uneven azimuths and heights
+        on_cone(12.0, 1.55, (0.30, 0.55, 0.40), 0.15),
+        on_cone(71.0, 1.70, (0.30, 0.40, 0.35), 0.15),
+        on_cone(97.0, 1.25, (0.28, 0.45, 0.30), 0.13),
+        on_cone(233.0, 1.60, (0.30, 0.60, 0.45), 0.16),
+        on_cone(262.0, 1.35, (0.26, 0.40, 0.30), 0.12),
+        on_cone(338.0, 1.75, (0.30, 0.45, 0.35), 0.15),
     ]
     return _assemble(parts, max_edge)
 
@@ -353,52 +516,186 @@ def _voyager(rng: np.random.Generator, *, max_edge: float = 0.3) -> trimesh.Trim
     return _assemble(parts, max_edge)
 
 
+_CRATERS_DEFAULT = (15, 25)
+_BOULDERS_DEFAULT = (30, 60)
+_LARGE_BOULDERS = (3, 5)
+
+
+def _boulder_sizes(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
+    """Boulder radii in body units: 3–5 large ones (0.06–0.11), the rest a power law.
+
+    The small ones follow a cumulative size distribution ``N(>s) ∝ s^-2.5`` on
+    ``[0.012, 0.04]`` (boulder counts on rubble piles are steep power laws).
+    """
+    n_large = min(n, int(rng.integers(_LARGE_BOULDERS[0], _LARGE_BOULDERS[1] + 1)))
+    large = rng.uniform(0.06, 0.11, n_large)
+    q, s_min, s_max = 2.5, 0.012, 0.04
+    u = rng.random(n - n_large)
+    small = s_min * (1.0 - u * (1.0 - (s_min / s_max) ** q)) ** (-1.0 / q)
+    return scale * np.concatenate([large, small])
+
+
 def _asteroid(
     rng: np.random.Generator,
     *,
     subdivisions: int = 5,
-    craters: int = 0,
+    craters: int | None = None,
+    boulders: int | None = None,
     axes: tuple[float, float, float] = (1.0, 0.95, 0.9),
     ridge_height: float = 0.06,
     ridge_width_deg: float = 14.0,
     roughness: float = 0.03,
+    top_shape: float = 0.3,
+    facet_depth: float = 0.05,
+    boulder_scale: float = 1.0,
 ) -> trimesh.Trimesh:
-    """Perturbed ellipsoid; radius function of the unit direction ``u``.
+    """Bennu-like rubble pile: a star-shaped body plus partly buried boulders.
 
-    ``r(u) = r_ell(u) · (1 + ridge(lat) + Σ waves(u) + Σ craters(u))`` with a Gaussian equatorial
-    ridge of relative height ``ridge_height``, ``12`` random smooth cosine waves of total
-    relative amplitude ``roughness``, and ``craters`` bowl-shaped craters with raised rims.
+    Body radius along the unit direction ``u`` (icosphere of ``subdivisions``)::
+
+        r(u) = min(r_top(u) · (1 + ridge(lat) + Σ waves(u)), facet(u)) · (1 + Σ craters(u))
+
+    - ``r_top`` blends the ellipsoid of semi-axes ``axes`` with weight ``top_shape`` towards
+      the double cone through its equator and poles (Bennu's spinning-top shape).
+    - ``ridge``: Gaussian equatorial ridge, relative height ``ridge_height``, width
+      ``ridge_width_deg``; ``waves``: 12 random smooth cosines of total relative amplitude
+      ``roughness``.
+    - ``facet``: one flat facet, a plane cutting ``facet_depth`` (relative) off the body
+      around a seeded direction within ±40° latitude (**[interpretation]** of "not a perfect
+      spheroid"; ``facet_depth=0`` disables it).
+    - ``craters``: bowl-shaped craters with raised rims, angular radii log-uniform in
+      0.04–0.3 rad; ``None`` (default) = a seeded count in 15..25, ``0`` = none.
+    - ``boulders``: irregular lumps (perturbed, stretched icospheres, 80 triangles each)
+      sitting on the surface, ``None`` (default) = a seeded count in 30..60 of which 3–5 are
+      large (radius 0.06–0.11 body units) and the rest small (0.012–0.04, steep power law),
+      times ``boulder_scale``. Each is sunk by 60–100 % of its radius and its faces lying
+      entirely inside the body are dropped, so surface samples do not land inside the body
+      (the boulders are therefore open below the surface; the body is closed).
+
+    Every feature draws from its own child stream of ``rng`` (``rng.spawn``), so e.g. changing
+    ``craters`` does not move the boulders' directions.
     """
     if not 1 <= int(subdivisions) <= 7:
         raise ConfigError(f"asteroid: subdivisions must be in 1..7, got {subdivisions}")
-    if int(craters) < 0:
-        raise ConfigError(f"asteroid: craters must be >= 0, got {craters}")
+    for key, val in (("craters", craters), ("boulders", boulders)):
+        if val is not None and not (
+            isinstance(val, int | np.integer) and not isinstance(val, bool) and val >= 0
+        ):
+            raise ConfigError(f"asteroid: {key} must be an integer >= 0 (or None), got {val!r}")
     a = np.asarray(axes, dtype=float)
     if a.shape != (3,) or not np.all(a > 0):
         raise ConfigError(f"asteroid: axes must be 3 positive numbers, got {axes}")
+    checks = (
+        ("top_shape", top_shape, 0.0, 1.0),
+        ("facet_depth", facet_depth, 0.0, 0.5),
+        ("ridge_height", ridge_height, 0.0, 1.0),
+        ("roughness", roughness, 0.0, 0.5),
+        ("boulder_scale", boulder_scale, 0.0, 5.0),
+    )
+    for key, val, lo, hi in checks:
+        if not (isinstance(val, int | float | np.number) and np.isfinite(val) and lo <= val <= hi):
+            raise ConfigError(f"asteroid: {key} must be in [{lo}, {hi}], got {val}")
+    if not (isinstance(ridge_width_deg, int | float | np.number) and ridge_width_deg > 0):
+        raise ConfigError(f"asteroid: ridge_width_deg must be > 0, got {ridge_width_deg}")
+    rng_waves, rng_facet, rng_craters, rng_boulders = rng.spawn(4)
+
+    n_waves = 12
+    k = rng_waves.normal(size=(n_waves, 3))
+    k *= (rng_waves.uniform(1.0, 4.0, n_waves) / np.linalg.norm(k, axis=1))[:, None]
+    amp = rng_waves.uniform(0.5, 1.0, n_waves) / np.linalg.norm(k, axis=1)
+    amp *= roughness / amp.sum() * 2.0
+    phase = rng_waves.uniform(0.0, 2 * math.pi, n_waves)
+
+    def smooth_radius(u: np.ndarray) -> np.ndarray:
+        r = 1.0 / np.sqrt(((u / a) ** 2).sum(axis=1))
+        if top_shape > 0:
+            rho = np.hypot(u[:, 0], u[:, 1])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                r_eq = rho / np.hypot(u[:, 0] / a[0], u[:, 1] / a[1])  # equator radius at az
+            r_eq = np.where(rho > 1e-12, r_eq, a[0])
+            r_cone = 1.0 / (rho / r_eq + np.abs(u[:, 2]) / a[2])
+            r = (1.0 - top_shape) * r + top_shape * r_cone
+        lat = np.arcsin(np.clip(u[:, 2], -1.0, 1.0))
+        f = 1.0 + ridge_height * np.exp(-((lat / math.radians(ridge_width_deg)) ** 2))
+        f += (amp[None, :] * np.cos(u @ k.T + phase[None, :])).sum(axis=1)
+        return r * f
+
+    lat_f = rng_facet.uniform(-math.radians(40.0), math.radians(40.0))
+    lon_f = rng_facet.uniform(0.0, 2 * math.pi)
+    n_f = np.array([math.cos(lat_f) * math.cos(lon_f), math.cos(lat_f) * math.sin(lon_f)])
+    n_f = np.append(n_f, math.sin(lat_f))
+    d_f = (1.0 - facet_depth) * float(smooth_radius(n_f[None, :])[0])
+
+    n_craters = (
+        int(rng_craters.integers(_CRATERS_DEFAULT[0], _CRATERS_DEFAULT[1] + 1))
+        if craters is None
+        else int(craters)
+    )
+    c_dir = rng_craters.normal(size=(n_craters, 3))
+    c_dir /= np.linalg.norm(c_dir, axis=1, keepdims=True)
+    c_rho = np.exp(rng_craters.uniform(math.log(0.04), math.log(0.3), n_craters))  # rad
+
+    def radius(u: np.ndarray) -> np.ndarray:
+        r = smooth_radius(u)
+        if facet_depth > 0:
+            cos_f = u @ n_f
+            with np.errstate(divide="ignore"):
+                r = np.where(cos_f > 1e-9, np.minimum(r, d_f / np.maximum(cos_f, 1e-9)), r)
+        g = np.ones(len(u))
+        for c, rho in zip(c_dir, c_rho, strict=True):
+            dep = 0.15 * rho
+            s = np.arccos(np.clip(u @ c, -1.0, 1.0)) / rho
+            g += np.where(s < 1.0, -dep * (1.0 - s**2), 0.0)
+            g += 0.3 * dep * np.exp(-(((s - 1.0) / 0.2) ** 2))
+        return r * g
+
     sph = trimesh.creation.icosphere(subdivisions=int(subdivisions))
     u = np.asarray(sph.vertices, dtype=float)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
-    r = 1.0 / np.sqrt(((u / a) ** 2).sum(axis=1))
-    lat = np.arcsin(np.clip(u[:, 2], -1.0, 1.0))
-    f = 1.0 + ridge_height * np.exp(-((lat / math.radians(ridge_width_deg)) ** 2))
-    n_waves = 12
-    k = rng.normal(size=(n_waves, 3))
-    k *= (rng.uniform(1.0, 4.0, n_waves) / np.linalg.norm(k, axis=1))[:, None]
-    amp = rng.uniform(0.5, 1.0, n_waves) / np.linalg.norm(k, axis=1)
-    amp *= roughness / amp.sum() * 2.0
-    phase = rng.uniform(0.0, 2 * math.pi, n_waves)
-    f += (amp[None, :] * np.cos(u @ k.T + phase[None, :])).sum(axis=1)
-    for _ in range(int(craters)):
-        c = rng.normal(size=3)
-        c /= np.linalg.norm(c)
-        rho = math.exp(rng.uniform(math.log(0.05), math.log(0.3)))  # angular radius, rad
-        dep = 0.15 * rho
-        s = np.arccos(np.clip(u @ c, -1.0, 1.0)) / rho
-        bowl = np.where(s < 1.0, -dep * (1.0 - s**2), 0.0)
-        rim = 0.3 * dep * np.exp(-(((s - 1.0) / 0.2) ** 2))
-        f += bowl + rim
-    return trimesh.Trimesh(u * (r * f)[:, None], sph.faces.copy(), process=False)
+    body = trimesh.Trimesh(u * radius(u)[:, None], sph.faces.copy(), process=False)
+
+    n_boulders = (
+        int(rng_boulders.integers(_BOULDERS_DEFAULT[0], _BOULDERS_DEFAULT[1] + 1))
+        if boulders is None
+        else int(boulders)
+    )
+    if n_boulders == 0 or boulder_scale == 0:
+        log.debug("asteroid: %d craters, no boulders", n_craters)
+        return body
+    sizes = _boulder_sizes(rng_boulders, n_boulders, boulder_scale)
+    b_dir = rng_boulders.normal(size=(n_boulders, 3))
+    b_dir /= np.linalg.norm(b_dir, axis=1, keepdims=True)
+    rock = trimesh.creation.icosphere(subdivisions=1)
+    rv = np.asarray(rock.vertices, dtype=float)
+    rocks_v, rocks_f = [], []
+    for s, c in zip(sizes, b_dir, strict=True):
+        stretch = np.sort(rng_boulders.uniform(0.55, 1.0, 3))[::-1]
+        stretch[0] = 1.0
+        v = rv * stretch * rng_boulders.uniform(0.8, 1.15, (len(rv), 1))
+        R = random_rotation(rng_boulders)
+        sink = rng_boulders.uniform(0.6, 1.0)
+        centre = c * (float(radius(c[None, :])[0]) + (1.0 - sink) * s)
+        rocks_v.append(centre + s * (v @ R.T))
+        rocks_f.append(rock.faces)
+    # drop boulder faces lying entirely inside the body (radial test against the body mesh)
+    from relnav.sim.raycast import RayCaster
+
+    V = np.concatenate(rocks_v)
+    dist = np.linalg.norm(V, axis=1)
+    r_body, _ = RayCaster(body).cast(np.zeros_like(V), V / dist[:, None])
+    inside = dist < r_body
+    F = np.concatenate([f + i * len(rv) for i, f in enumerate(rocks_f)])
+    F = F[~inside[F].all(axis=1)]
+    rocks = trimesh.Trimesh(V, F, process=False)
+    rocks.remove_unreferenced_vertices()
+    log.debug(
+        "asteroid: %d craters, %d boulders (%d of %d faces above the surface)",
+        n_craters,
+        n_boulders,
+        len(F),
+        n_boulders * len(rock.faces),
+    )
+    return trimesh.util.concatenate([body, rocks])
 
 
 _BUILDERS: dict[str, tuple[Callable[..., trimesh.Trimesh], float | None]] = {
@@ -429,8 +726,9 @@ def procedural_target(
     scale_to : float, optional
         Longest bounding-box side in metres (default: natural size; 500 m for ``asteroid``).
     **params
-        Builder options, e.g. ``craters=N``, ``subdivisions=5`` (asteroid) or ``max_edge``
-        (largest triangle edge of the satellites, m).
+        Builder options, e.g. ``craters=N``, ``boulders=N``, ``subdivisions=5``,
+        ``top_shape``, ``facet_depth``, ``boulder_scale`` (asteroid; see ``_asteroid``) or
+        ``max_edge`` (largest triangle edge of the satellites and capsule, m).
 
     Raises
     ------

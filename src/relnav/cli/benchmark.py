@@ -1,0 +1,145 @@
+"""``relnav benchmark`` (run a grid, resumable, parallel) and ``relnav report`` (tables, figures)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from relnav.cli._common import console, progress_bar
+
+
+def benchmark(
+    grid: Path = typer.Argument(..., help="Grid YAML (e.g. configs/paper1-quick.yaml)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Benchmark folder (created; resumable)."),
+    workers: int = typer.Option(
+        2, "--workers", "-w", min=0, help="Local worker processes (0 = in this process)."
+    ),
+    scheduler: str = typer.Option(
+        None, "--scheduler", help="Existing Dask scheduler, e.g. tcp://host:8786."
+    ),
+    force: bool = typer.Option(False, "--force", help="Rerun every job, finished or not."),
+    retry_failed: bool = typer.Option(
+        False, "--retry-failed", help="Rerun jobs recorded as failed."
+    ),
+    seeds: int = typer.Option(None, "--seeds", min=1, help="Only the first N seeds."),
+    max_frames: int = typer.Option(
+        None, "--max-frames", min=2, help="Only the first N frames of every scenario."
+    ),
+    scenario: list[str] = typer.Option(
+        None, "--scenario", help="Only these scenarios (glob, repeatable)."
+    ),
+    method: list[str] = typer.Option(
+        None, "--method", "-m", help="Only methods whose label matches (glob, repeatable)."
+    ),
+    dry_run: bool = typer.Option(
+        False, "--dry-run", help="List the jobs (and how many are finished) and stop."
+    ),
+    report: bool = typer.Option(True, "--report/--no-report", help="Write the report at the end."),
+) -> None:
+    """Run a benchmark grid: scenarios × methods × seeds (× nuisances), in parallel.
+
+    Results go to OUT/results.sqlite as each job finishes; rerunning the same command skips
+    finished jobs (a killed run resumes). At the end OUT/report.md, OUT/tables/*.csv and
+    OUT/figures/*.png are written.
+
+    Examples:
+
+    [bold]relnav benchmark configs/paper1-quick.yaml --out bench/quick[/]
+
+    [bold]relnav benchmark configs/paper1-full.yaml --out bench/full --seeds 1 --max-frames 60[/]
+
+    [bold]relnav benchmark grid.yaml --out bench/x --scheduler tcp://10.0.0.5:8786[/]
+    """
+    import logging
+
+    from rich.table import Table
+
+    from relnav.eval.benchmark import STORE_FILE, expand_jobs, load_grid, run_benchmark
+
+    g = load_grid(
+        grid, seeds=seeds, max_frames=max_frames, scenarios=scenario or None, methods=method or None
+    )
+    jobs = expand_jobs(g)
+    if dry_run:
+        from relnav.eval.store import ResultsStore
+
+        done: set[str] = set()
+        if (out / STORE_FILE).is_file():
+            with ResultsStore(out / STORE_FILE, readonly=True) as st:
+                done = st.finished_ids()
+        t = Table(title=f"{g.name}: {len(jobs)} jobs")
+        for col in ("scenario", "nuisance", "seed", "method", "finished"):
+            t.add_column(col)
+        for j in jobs:
+            t.add_row(
+                j.scenario,
+                j.nuisance_label,
+                str(j.seed),
+                j.method_label,
+                "yes" if j.job_id in done else "",
+            )
+        console.print(t)
+        return
+    where = scheduler or ("this process" if workers == 0 else f"{workers} local workers")
+    console.print(
+        f"[bold]{g.name}[/]: {len(g.scenarios)} scenarios × {len(g.methods)} methods × "
+        f"{len(g.seeds)} seeds × {len(g.nuisance_levels())} nuisance levels = {len(jobs)} jobs "
+        f"on {where}",
+        highlight=False,
+    )
+    logging.getLogger("relnav").setLevel(max(logging.getLogger().level, logging.WARNING))
+    with progress_bar() as bar:
+        task = bar.add_task("jobs", total=None)
+
+        def prog(done: int, total: int, row: dict) -> None:  # type: ignore[type-arg]
+            bar.update(task, completed=done, total=total)
+            if row.get("status") != "ok":
+                bar.console.print(
+                    f"[yellow]failed[/] {row['method_label']} on {row['scenario']} seed "
+                    f"{row['seed']}: {row.get('error', '')[:200]}",
+                    highlight=False,
+                )
+
+        s = run_benchmark(
+            g,
+            out,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            retry_failed=retry_failed,
+            progress=prog,
+        )
+    console.print(
+        f"{s.n_jobs} jobs: {s.n_skipped} already finished, {s.n_ok} ok, {s.n_failed} failed "
+        f"in {s.wall_s / 60:.1f} min ({s.executor}); store {out / STORE_FILE}",
+        highlight=False,
+    )
+    if report:
+        from relnav.eval.report import write_report
+
+        p = write_report(out)
+        console.print(f"wrote {p}", highlight=False)
+
+
+def report(
+    out: Path = typer.Argument(..., help="Benchmark folder written by `relnav benchmark`."),
+    grid: Path = typer.Option(
+        None, "--grid", help="Report on this grid's jobs instead of the folder's grid.yaml."
+    ),
+) -> None:
+    """(Re)write OUT/report.md, OUT/tables/*.csv and OUT/figures/*.png from the results store.
+
+    Example: [bold]relnav report bench/quick[/]
+    """
+    from relnav.eval.benchmark import load_grid
+    from relnav.eval.report import write_report
+
+    p = write_report(out, grid=None if grid is None else load_grid(grid))
+    console.print(f"wrote {p}", highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Register ``relnav benchmark`` and ``relnav report``."""
+    app.command("benchmark")(benchmark)
+    app.command("report")(report)
