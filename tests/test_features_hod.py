@@ -7,7 +7,8 @@ import pytest
 
 from relnav.errors import ConfigError
 from relnav.features import compute, get_descriptor
-from relnav.features.hod import hod_histograms, visit_order
+from relnav.features.hod import hod_histograms as _hod_histograms
+from relnav.features.hod import visit_order
 from relnav.geometry import mean_resolution, random_transform, transform_points
 
 
@@ -18,6 +19,12 @@ def bumpy_sphere(n: int, seed: int) -> np.ndarray:
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     rad = 1.0 + 0.15 * np.sin(3.0 * u[:, 0]) * np.cos(2.0 * u[:, 1]) + 0.05 * u[:, 2] ** 3
     return u * rad[:, None] * np.array([1.6, 1.0, 0.7])
+
+
+def hod_histograms(*args, **kwargs):
+    """The all-pairs reading (ALGORITHMS §A.1) that most tests below exercise."""
+    kwargs.setdefault("pairs", "all")
+    return _hod_histograms(*args, **kwargs)
 
 
 def brute_hod(P: np.ndarray, kp: np.ndarray, r: float, fine: bool, norm: str = "2r") -> np.ndarray:
@@ -201,3 +208,42 @@ def test_bad_options_raise_config_error(cloud: np.ndarray) -> None:
         compute("hods", cloud, radius=1.0, bins=12)
     with pytest.raises(ConfigError):
         compute("hod", cloud, radius=1.0, mode="fast", fast_method="pairs")
+
+
+def brute_hod_keypoint(P: np.ndarray, kp: np.ndarray, r: float, fine: bool) -> np.ndarray:
+    """pmf of ‖q − p‖ / r over the support of each keypoint (keypoint excluded), plain NumPy."""
+    nf = 200
+    out = np.full((kp.size, 40 + (nf if fine else 0)), np.nan, dtype=np.float32)
+    for row, k in enumerate(kp):
+        d = np.linalg.norm(P - P[k], axis=1)
+        inside = np.flatnonzero(d <= r)
+        if inside.size < 5:
+            continue
+        others = inside[inside != k]
+        b = np.minimum((d[others] / r * nf).astype(int), nf - 1)
+        h = np.bincount(b, minlength=nf)
+        out[row, :40] = h.reshape(40, 5).sum(axis=1) / others.size
+        if fine:
+            out[row, 40:] = h / others.size
+    return out
+
+
+@pytest.mark.parametrize("fine", [False, True])
+def test_keypoint_pairs_equal_brute_force(cloud: np.ndarray, fine: bool) -> None:
+    r = 3.0 * mean_resolution(cloud)
+    kp = np.arange(cloud.shape[0])
+    got = _hod_histograms(cloud, kp, radius=r, fine=fine)  # pairs="keypoint" is the default
+    np.testing.assert_allclose(got, brute_hod_keypoint(cloud, kp, r, fine), atol=1e-6)
+
+
+def test_keypoint_pairs_discriminate_where_all_pairs_do_not(rng: np.random.Generator) -> None:
+    """At r = 80·Tr on a small compact cloud every all-pairs histogram is the same (the support is
+    the whole cloud); the keypoint-centred ones still differ from point to point."""
+    d = rng.normal(size=(300, 3))
+    P = d / np.linalg.norm(d, axis=1, keepdims=True) * np.array([3.0, 2.0, 1.0])
+    r = 80.0 * mean_resolution(P)
+    kp = np.arange(P.shape[0])
+    all_pairs = _hod_histograms(P, kp, radius=r, fine=False, pairs="all")
+    keypoint = _hod_histograms(P, kp, radius=r, fine=False, pairs="keypoint")
+    assert np.ptp(all_pairs, axis=0).max() < 1e-6
+    assert np.ptp(keypoint, axis=0).max() > 0.05

@@ -107,7 +107,7 @@ def test_global_registration_synthetic(seed: int) -> None:
     assert res.n_inliers == 15
     assert 0 < res.inlier_rmse < 0.05 and res.fitness > 0.9
     assert res.info["seed"] == seed and len(res.info["matches"]) == 15
-    assert res.info["n_hypotheses"] > 0
+    assert res.info["n_hypotheses"] > 0 and "rival_score" in res.info
 
 
 def test_determinism_and_registry() -> None:

@@ -1,4 +1,4 @@
-"""``relnav benchmark`` (run a grid, resumable, parallel) and ``relnav report`` (tables, figures)."""
+"""``relnav benchmark`` (run a grid, parallel, resumable) and ``relnav report`` (write it up)."""
 
 from __future__ import annotations
 

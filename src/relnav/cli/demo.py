@@ -10,7 +10,7 @@ from relnav.cli._common import console, progress_bar
 
 DEMO_PRESET = "sim-voyager"
 DEMO_FRAMES = 60
-DEMO_METHODS = ("feature:hods+gcc+alphabeta", "feature:hods+gcc+svd")
+DEMO_METHODS = ("feature:hods+gcc+alphabeta", "feature:hods+gcc+svd", "icp-point")
 TABLE_KEYS = (
     ("e_T_avg", "m"),
     ("e_T_max", "m"),

@@ -22,7 +22,8 @@ point onto the nearest plane (or line) grown from the dense camera cloud, or dis
    ``plane_angle_deg`` of the line's, distance to the line below ``plane_dist``
    (``L = p1 ∧ p2 ∧ e∞``: stored as a point and a unit direction).
 4. **LIDAR points** (already in the camera frame) get PCA normals from their own ``lidar_k``
-   (10) neighbours. The nearest plane/line is the segment, among those of the ``n_nearest`` (8)
+   (20 **[interpretation]**: 10 neighbours lie on one or two scan lines, too few for a normal)
+   neighbours. The nearest plane/line is the segment, among those of the ``n_nearest`` (8)
    nearest labelled camera points, with the smallest orthogonal distance; **[interpretation]**
    segments are finite — one whose nearest member point is farther than
    ``max(δ, 2·plane_dist) + 2·plane_dist`` does not count (a point beyond a face's edge is not
@@ -425,7 +426,7 @@ def cluster_and_project(
     min_line_points: int = 10,
     sigma_deg: float = 45.0,
     delta: float | Literal["parallel-planes", "resolution"] = "parallel-planes",
-    lidar_k: int = 10,
+    lidar_k: int = 20,
     n_nearest: int = 8,
     use_lines: bool = True,
 ) -> ClusterResult:

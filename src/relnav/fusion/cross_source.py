@@ -30,10 +30,15 @@ Algorithm (paper 2 §2.2.2 steps 1–5 with the readings of ALGORITHMS §G.2; ev
    **[interpretation: paper 2 is silent]** the correspondence of *seed pairs* of well separated
    early samples (``n_seed_pairs`` = 6 pairs among the first 12 FPS samples with the largest
    ``ρ_a ρ_b sin∠``, ``sin∠ > 0.3``) is searched exhaustively: every pair of
-   shell candidates ``(q_a, q_b)`` passing the d⁴ test (on a ``τ``-voxel subsample of the camera
-   cloud) gives a rotation hypothesis (TRIAD of the triangles ``(0, p_a, p_b)``,
+   shell candidates ``(q_a, q_b)`` passing the d⁴ test with the looser tolerance
+   ``hyp_tol_factor·τ`` (2τ; on a ``τ``-voxel subsample of the camera cloud) gives a rotation
+   hypothesis (TRIAD of the triangles ``(0, p_a, p_b)``,
    ``(0, q_a, q_b)``); hypotheses are scored by how many of the next ``n_score`` FPS samples land
-   within ``3τ`` of a camera point, the best ``n_refine`` are rescored on ``4·n_score`` samples.
+   within ``3τ`` of a camera point, the best ``n_refine`` are rescored on ``4·n_score`` samples
+   (``info["hypothesis_score"]``; ``info["rival_score"]`` is the best score of the hypotheses
+   more than ``ambiguity_deg`` (30°) away from the winner — close scores mean a near-symmetric
+   view, where the global search can pick a flipped solution: give ``init`` or
+   ``max_rotation_deg`` when the sensors' mounting is known).
    The best hypothesis only *gates* the search: candidates for ``p_l`` are taken within
    ``gate_factor·τ`` (1.5τ) of its predicted position, then the d⁴ check above decides.
    ``max_rotation_deg`` (with ``init``'s rotation, identity by default) restricts the hypotheses
@@ -301,6 +306,10 @@ class CrossSourceRegistration:
         Shell candidates per seed sample kept (random subset beyond; seeded).
     max_rotation_deg : float, optional
         Only hypotheses within this angle of the prior rotation (``init`` or identity).
+    ambiguity_deg : float
+        Rival hypotheses (``info["rival_score"]``) are at least this far from the winner.
+    hyp_tol_factor : float
+        Tolerance of the seed-pair d⁴ test in multiples of ``τ``.
     refine : int
         Extra matching passes gated by the current motor estimate.
     quad_select : {"farthest", "consistent"}
@@ -335,6 +344,8 @@ class CrossSourceRegistration:
         n_refine: int = 10,
         max_candidates: int = 400,
         max_rotation_deg: float | None = None,
+        ambiguity_deg: float = 30.0,
+        hyp_tol_factor: float = 2.0,
         refine: int = 1,
         quad_select: Literal["farthest", "consistent"] = "farthest",
         keep_frac: float = 0.5,
@@ -392,6 +403,12 @@ class CrossSourceRegistration:
         self.max_candidates = int(max_candidates)
         self.max_rotation_deg = None if max_rotation_deg is None else float(max_rotation_deg)
         self.refine = int(refine)
+        if not 0 < float(ambiguity_deg) < 180:
+            raise ConfigError(f"ambiguity_deg must be in (0, 180), got {ambiguity_deg}")
+        self.ambiguity_deg = float(ambiguity_deg)
+        if not float(hyp_tol_factor) >= 1:
+            raise ConfigError(f"hyp_tol_factor must be >= 1, got {hyp_tol_factor}")
+        self.hyp_tol_factor = float(hyp_tol_factor)
         if quad_select not in ("farthest", "consistent"):
             raise ConfigError(
                 f"quad_select must be 'farthest' or 'consistent', got {quad_select!r}"
@@ -496,9 +513,10 @@ class CrossSourceRegistration:
             R_h = R_prior
             info["n_hypotheses"] = 0
         else:
-            R_h, n_hyp, score = self._hypothesis(P0[order], Q0, tree_q, tau, rng, R_prior)
+            R_h, n_hyp, score, rival = self._hypothesis(P0[order], Q0, tree_q, tau, rng, R_prior)
             info["n_hypotheses"] = n_hyp
             info["hypothesis_score"] = score
+            info["rival_score"] = rival
             if R_h is None:
                 timings["hypotheses"] = time.perf_counter() - t0
                 return flagged(
@@ -580,8 +598,8 @@ class CrossSourceRegistration:
         tau: float,
         rng: np.random.Generator,
         R_prior: np.ndarray | None,
-    ) -> tuple[np.ndarray | None, int, float]:
-        """Best rotation ``camera0 ≈ R lidar0`` from seed-pair correspondences (centred)."""
+    ) -> tuple[np.ndarray | None, int, float, float]:
+        """Best rotation ``camera0 ≈ R lidar0`` (centred), hypothesis count, score, rival score."""
         # camera candidates on a tau-voxel subsample (one point per voxel)
         keys = np.floor(Q0 / tau).astype(np.int64)
         _, first = np.unique(keys, axis=0, return_index=True)
@@ -597,10 +615,11 @@ class CrossSourceRegistration:
                     pairs.append((rho_s[a] * rho_s[b] * sin, a, b))
         pairs.sort(reverse=True)
         pairs = pairs[: self.n_seed_pairs]
+        th = self.hyp_tol_factor * tau
         hyps = []
         for _, a, b in pairs:
-            ca = np.flatnonzero(np.abs(rho_q - rho_s[a]) < tau)
-            cb = np.flatnonzero(np.abs(rho_q - rho_s[b]) < tau)
+            ca = np.flatnonzero(np.abs(rho_q - rho_s[a]) < th)
+            cb = np.flatnonzero(np.abs(rho_q - rho_s[b]) < th)
             if ca.size == 0 or cb.size == 0:
                 continue
             if ca.size > self.max_candidates:
@@ -615,9 +634,9 @@ class CrossSourceRegistration:
             area_p = 0.5 * np.linalg.norm(np.cross(S[a], S[b]))
             area_q = 0.5 * np.linalg.norm(np.cross(qa[:, None, :], qb[None, :, :]), axis=2)
             ok = (
-                (np.abs(D - dab) < tau)
+                (np.abs(D - dab) < th)
                 & (np.abs(cos_q - cos_p) <= self.cos_tol)
-                & (np.abs(area_q - area_p) <= self.area_tol * area_p + 0.5 * tau * dab)
+                & (np.abs(area_q - area_p) <= self.area_tol * area_p + 0.5 * th * dab)
             )
             ia, ib = np.nonzero(ok)
             if ia.size == 0:
@@ -626,13 +645,13 @@ class CrossSourceRegistration:
             Fp = _triad(S[a][None], S[b][None])[0]
             hyps.append(Fq @ Fp.T)
         if not hyps:
-            return None, 0, 0.0
+            return None, 0, 0.0, -math.inf
         H = np.concatenate(hyps, axis=0)
         if R_prior is not None and self.max_rotation_deg is not None:
             ang = np.asarray(rotation_angle(np.einsum("ji,hjk->hik", R_prior, H)))
             H = H[ang <= math.radians(self.max_rotation_deg)]
             if H.shape[0] == 0:
-                return None, 0, 0.0
+                return None, 0, 0.0, -math.inf
         n_hyp = int(H.shape[0])
 
         def score(Hs: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -642,10 +661,16 @@ class CrossSourceRegistration:
             return np.sum(d < 3.0 * tau, axis=1) - d.mean(axis=1) / (3.0 * tau)
 
         s1 = score(H, S[: min(S.shape[0], self.n_score)])
-        top = np.argsort(-s1, kind="stable")[: self.n_refine]
-        s2 = score(H[top], S[: min(S.shape[0], 4 * self.n_score)])
+        order = np.argsort(-s1, kind="stable")
+        top = order[: self.n_refine]
+        S2 = S[: min(S.shape[0], 4 * self.n_score)]
+        s2 = score(H[top], S2)
         best = int(top[int(np.argmax(s2))])
-        return H[best], n_hyp, float(np.max(s2))
+        # best rival: the best-scoring hypotheses at least `ambiguity_deg` away from the winner
+        ang = np.asarray(rotation_angle(np.einsum("ji,hjk->hik", H[best], H[order])))
+        far = order[ang > math.radians(self.ambiguity_deg)][: self.n_refine]
+        rival = float(np.max(score(H[far], S2))) if far.size else -math.inf
+        return H[best], n_hyp, float(np.max(s2)), rival
 
     def _match(
         self,

@@ -53,7 +53,7 @@ from relnav.geometry.rotations import matrix_to_quat
 from relnav.geometry.se3 import invert
 from relnav.registration.result import RegistrationResult
 
-__all__ = ["ContourModel", "Observation"]
+__all__ = ["ContourModel", "FusedFrame", "Observation", "fuse_frame"]
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +75,75 @@ class Observation(NamedTuple):
     position: np.ndarray
     quaternion: np.ndarray
     quality: float
+
+
+class FusedFrame(NamedTuple):
+    """One fused frame (camera frame ``S_k``).
+
+    Attributes
+    ----------
+    points : (K, 3) float64
+        Camera points + registered (and, with clustering, projected) LIDAR points (m).
+    registration : RegistrationResult
+        ``T_target_source = T_camera_lidar`` of the cross-source registration.
+    clustering : ClusterResult or None
+        The plane clustering output (``None`` when disabled or the registration failed).
+    """
+
+    points: np.ndarray
+    registration: RegistrationResult
+    clustering: Any
+
+
+def fuse_frame(
+    camera_pts: np.ndarray,
+    lidar_pts: np.ndarray,
+    *,
+    registration: Any = None,
+    cluster: bool = True,
+    init: np.ndarray | None = None,
+    **cluster_options: Any,
+) -> FusedFrame:
+    """Paper 2's per-frame fusion: cross-source registration, then plane clustering (§G.2–G.4).
+
+    Parameters
+    ----------
+    camera_pts : (M, 3) float64
+        Depth-camera cloud, camera frame (m).
+    lidar_pts : (N, 3) float64
+        LIDAR cloud, LIDAR frame (m).
+    registration : Registration, optional
+        Default :class:`~relnav.fusion.cross_source.CrossSourceRegistration` (m = 15, seed 0).
+    cluster : bool
+        Snap the registered LIDAR points onto the camera's planes/lines
+        (:func:`~relnav.fusion.clustering.cluster_and_project`).
+    init : (4, 4) float64, optional
+        Prior ``T_camera_lidar`` (e.g. the previous frame's, the rig calibration).
+    **cluster_options
+        Passed to ``cluster_and_project``.
+
+    Returns
+    -------
+    FusedFrame
+        When the registration is not ``ok`` the LIDAR points are left out (camera points only).
+    """
+    from relnav.fusion.clustering import cluster_and_project
+    from relnav.fusion.cross_source import CrossSourceRegistration
+
+    reg = registration if registration is not None else CrossSourceRegistration()
+    C = np.asarray(camera_pts, dtype=np.float64).reshape(-1, 3)
+    C = C[np.isfinite(C).all(axis=1)]
+    res = reg.register(lidar_pts, C, init=init)
+    if not res.ok:
+        return FusedFrame(C.copy(), res, None)
+    T = res.T_target_source
+    L = np.asarray(lidar_pts, dtype=np.float64).reshape(-1, 3)
+    L = L[np.isfinite(L).all(axis=1)]
+    Lc = L @ T[:3, :3].T + T[:3, 3]
+    if not cluster:
+        return FusedFrame(np.vstack([C, Lc]), res, None)
+    cl = cluster_and_project(C, Lc, **cluster_options)
+    return FusedFrame(cl.fused_points, res, cl)
 
 
 class ContourModel:

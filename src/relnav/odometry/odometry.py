@@ -20,6 +20,7 @@ from typing import Any, Literal
 import numpy as np
 
 from relnav.errors import RelnavError
+from relnav.geometry.rotations import rotation_angle
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.types import Scan
@@ -74,6 +75,13 @@ class Odometry:
     motion_prior : {"constant_velocity", "identity"}
         Step used for frames whose registration is not ``ok``, and the initial guess given to
         the registration.
+    gate_rotation_deg, gate_translation : float, optional
+        Innovation gate (a relnav extension, off by default as in paper 1): a registered step
+        whose rotation differs from the motion prior's by more than ``gate_rotation_deg``
+        degrees, or whose translation differs by more than ``gate_translation`` metres, is
+        rejected (status ``failed``) and the prior is used instead. It protects the chain from
+        the occasional wrong registration of a smooth trajectory; it also rejects genuine
+        manoeuvres larger than the gate.
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -84,6 +92,8 @@ class Odometry:
         *,
         initial_pose: np.ndarray | None = None,
         motion_prior: MotionPrior = "constant_velocity",
+        gate_rotation_deg: float | None = None,
+        gate_translation: float | None = None,
         **method_options: Any,
     ) -> None:
         self.registration = (
@@ -92,6 +102,8 @@ class Odometry:
         if motion_prior not in ("constant_velocity", "identity"):
             raise RelnavError(f"unknown motion prior {motion_prior!r}")
         self.motion_prior: MotionPrior = motion_prior
+        self.gate_rotation = None if gate_rotation_deg is None else np.radians(gate_rotation_deg)
+        self.gate_translation = gate_translation
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.last_step = np.eye(4)
         self._prev_points: np.ndarray | None = None
@@ -128,6 +140,8 @@ class Odometry:
             )
         else:
             result = self._register(points, prepared, prepare_error)
+            if result.status == "ok":
+                self._apply_gate(result)
             used_prior = result.status != "ok"
             step = self.prior_step if used_prior else result.T_target_source
             if used_prior:
@@ -154,6 +168,23 @@ class Odometry:
         self._prev_prepared = prepared
         self.n_frames += 1
         return out
+
+    def _apply_gate(self, result: RegistrationResult) -> None:
+        """Reject (in place) a step too far from the motion prior."""
+        if self.gate_rotation is None and self.gate_translation is None:
+            return
+        d = np.linalg.inv(self.prior_step) @ result.T_target_source
+        d_rot = rotation_angle(d[:3, :3])
+        d_t = float(np.linalg.norm(result.T_target_source[:3, 3] - self.prior_step[:3, 3]))
+        if (self.gate_rotation is not None and d_rot > self.gate_rotation) or (
+            self.gate_translation is not None and d_t > self.gate_translation
+        ):
+            result.status = "failed"
+            result.message = (
+                f"step rejected by the motion gate (Δrot {np.degrees(d_rot):.1f}°, "
+                f"Δt {d_t:.3g} m from the prior)"
+            )
+            result.info["gated"] = True
 
     def _register(
         self, points: np.ndarray, prepared: Any, prepare_error: str

@@ -605,6 +605,8 @@ class Open3DFPFHRansac(_ExternalBase):
         Refinement ICP iterations.
     seed : int
         Seed of Open3D's RNG (``open3d.utility.random.seed``); recorded in ``info["seed"]``.
+        Open3D evaluates RANSAC hypotheses on several threads, so two runs with the same seed
+        can still differ when the threads are scheduled differently (seen under load).
     covariance : bool
         Compute the twist covariance (module docstring).
     min_points, degeneracy_ratio

@@ -573,7 +573,9 @@ def _asteroid(
       (the boulders are therefore open below the surface; the body is closed).
 
     Every feature draws from its own child stream of ``rng`` (``rng.spawn``), so e.g. changing
-    ``craters`` does not move the boulders' directions.
+    ``craters`` does not move the boulders' directions. The body comes first in the mesh (the
+    icosphere's vertices and faces, in order), then the boulders. The drawn counts and the
+    facet's unit normal are recorded in ``mesh.metadata["asteroid"]``.
     """
     if not 1 <= int(subdivisions) <= 7:
         raise ConfigError(f"asteroid: subdivisions must be in 1..7, got {subdivisions}")
@@ -659,8 +661,14 @@ def _asteroid(
         if boulders is None
         else int(boulders)
     )
+    info = {
+        "craters": n_craters,
+        "boulders": 0,
+        "facet_normal": n_f.tolist() if facet_depth > 0 else None,
+    }
     if n_boulders == 0 or boulder_scale == 0:
         log.debug("asteroid: %d craters, no boulders", n_craters)
+        body.metadata["asteroid"] = info
         return body
     sizes = _boulder_sizes(rng_boulders, n_boulders, boulder_scale)
     b_dir = rng_boulders.normal(size=(n_boulders, 3))
@@ -695,7 +703,9 @@ def _asteroid(
         len(F),
         n_boulders * len(rock.faces),
     )
-    return trimesh.util.concatenate([body, rocks])
+    mesh = trimesh.util.concatenate([body, rocks])
+    mesh.metadata["asteroid"] = {**info, "boulders": n_boulders}
+    return mesh
 
 
 _BUILDERS: dict[str, tuple[Callable[..., trimesh.Trimesh], float | None]] = {
@@ -757,7 +767,13 @@ def procedural_target(
         name=str(name),
         mesh=mesh,
         source=f"procedural:{key}:seed={int(seed)}",
-        metadata={"procedural": key, "seed": int(seed), "params": dict(params), "scale": scale},
+        metadata={
+            "procedural": key,
+            "seed": int(seed),
+            "params": dict(params),
+            "scale": scale,
+            **({"drawn": mesh.metadata[key]} if key in mesh.metadata else {}),
+        },
     )
 
 
