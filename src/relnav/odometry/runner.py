@@ -59,6 +59,12 @@ class OdometryRun:
         times = [s.time_s for s in self.steps[1:]]
         return 1000.0 * float(np.mean(times)) if times else float("nan")
 
+    @property
+    def median_time_ms(self) -> float:
+        """Median wall-clock time per registered frame, ms (robust to one-off JIT compilation)."""
+        times = [s.time_s for s in self.steps[1:]]
+        return 1000.0 * float(np.median(times)) if times else float("nan")
+
     def diagnostics(self) -> list[dict[str, Any]]:
         """One row per frame: points, correspondences, inliers, status, stage times (ms)."""
         rows = []
