@@ -72,8 +72,11 @@ for _name in COMMAND_MODULES:
 
 def main() -> None:
     """Console-script entry point."""
+    from relnav._threads import limit_blas_threads
+
     try:
-        app()
+        with limit_blas_threads(1):  # per-process work is small linear algebra: see _threads
+            app()
     except RelnavError as e:
         if _STATE["verbose"]:
             err_console.print_exception()

@@ -95,9 +95,7 @@ def get_estimator(name: str, **options: object) -> TransformEstimator:
     """Instantiate the estimator registered as ``name`` with ``options``."""
     _load_all()
     if name not in _REGISTRY:
-        raise ConfigError(
-            f"unknown estimator {name!r}; available: {', '.join(sorted(_REGISTRY))}"
-        )
+        raise ConfigError(f"unknown estimator {name!r}; available: {', '.join(sorted(_REGISTRY))}")
     try:
         return _REGISTRY[name][0](**options)
     except TypeError as e:

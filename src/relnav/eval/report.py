@@ -298,6 +298,10 @@ def _write_csv(path: Path, header: Sequence[str], rows: Iterable[Sequence[Any]])
     return path
 
 
+def _order(x: str, order: Sequence[str]) -> tuple[int, str]:
+    return (order.index(x) if x in order else len(order), x)
+
+
 def _slug(s: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in s)
 
@@ -605,7 +609,10 @@ def _scenario_figures(ctx: _Ctx, scn: str) -> list[Path]:
         b = _best([a for (d, ff), a in combos.items() if ff == f and seed in a.seeds])
         if b is not None:
             per_filter[b.info.display] = b
-    comps = [a for a in _competitors(ctx, scn) if seed in a.seeds]
+    comps = sorted(
+        (a for a in _competitors(ctx, scn) if seed in a.seeds),
+        key=lambda a: _order(a.info.method, (*_COMPETITORS, *_BASELINES)),
+    )
     best_all = _best(per_filter.values())
     out: list[Path] = []
     gt = None
@@ -693,13 +700,15 @@ def _section_normalised(ctx: _Ctx) -> dict[str, dict[str, Any]]:
             "tradeoff": trade,
             "best_competitor": comp,
         }
-        for d, v in per_d.items():
+        for d in sorted(per_d, key=lambda d: _order(d, _DESC_ORDER)):
+            v = per_d[d]
             t = np.nanmean([a.m("time_ms") for (dd, _), a in combos.items() if dd == d])
             pts14.append((scn, DESCRIPTOR_NAMES.get(d, d), float(t), v))
             d_rows.append([scn, d, v, float(t)])
-        for f, v in per_f.items():
-            f_rows.append([scn, f, v])
-        fig16[scn] = {FILTER_NAMES.get(f, f): v for f, v in per_f.items()}
+        ordered_f = sorted(per_f, key=lambda f: _order(f, _FILTER_ORDER))
+        for f in ordered_f:
+            f_rows.append([scn, f, per_f[f]])
+        fig16[scn] = {FILTER_NAMES.get(f, f): per_f[f] for f in ordered_f}
     if not summary:
         return summary
     C = opts.normalisation_constant
@@ -947,7 +956,9 @@ def _section_ablations(ctx: _Ctx) -> dict[str, list[tuple[str, Aggregate, Aggreg
         any_table = True
         pre = "normalised " if norm else ""
         head = ["scenario", "top combination", "variant"] + [
-            f"{pre}{k} ({x})" for k in ("e^T_avg", "e^R_avg", "e^RT", "t ms") for x in (la, lb)
+            f"{'' if k == 't ms' else pre}{k} ({x})"
+            for k in ("e^T_avg", "e^R_avg", "e^RT", "t ms")
+            for x in (la, lb)
         ]
         ctx.md += [f"### {title}", "", _md_table(head, rows), ""]
         ctx.tables.append(
@@ -1068,7 +1079,7 @@ def _section_paper(
         rows.append(
             [
                 scn,
-                f"{_f(float(np.nanmedian(nf)))} ({'part' if frames_of.get(scn) else 'full'})",
+                f"{float(np.nanmedian(nf)):.0f} ({'part' if frames_of.get(scn) else 'full'})",
                 b.info.display if b else "—",
                 _f(b.m("T_error_pct")) if b else "—",
                 _f(b.m("e_RT")) if b else "—",
@@ -1475,6 +1486,7 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
     _write_all_results(ctx)
     _section_summary(ctx)
     summary = _section_normalised_placeholder(ctx)
+    _section_headline(ctx, summary)
     _section_appendix(ctx)
     ctx.md += summary.pop("__md__", [])
     abl = _section_ablations(ctx)
@@ -1498,6 +1510,91 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
     )
     log.info("wrote %s (%d tables, %d figures)", report, len(ctx.tables), len(ctx.figures))
     return report
+
+
+def _section_headline(ctx: _Ctx, summary: dict[str, Any]) -> None:
+    """Per scenario: best proposed combination, HoD-S/αβ, best competitor (clean level)."""
+    rows, csv_rows = [], []
+    for scn in ctx.scenarios:
+        v = summary.get(scn)
+        if not isinstance(v, dict):
+            continue
+        b, c = v["best"], v["best_competitor"]
+        h = _combos(ctx, scn).get(("hods", "alphabeta"))
+        cells = [scn]
+        for a, named in ((b, True), (h, False), (c, True)):
+            if a is None:
+                cells += ["—"] * (4 if named else 3)
+                continue
+            if named:
+                cells.append(a.info.display)
+            cells += [_pm(a, "e_RT"), _f(a.m("T_error_pct")), _f(a.m("time_ms"))]
+        rows.append(cells)
+        csv_rows.append(
+            [
+                scn,
+                b.info.label if b else "",
+                b.m("e_RT") if b else math.nan,
+                b.m("T_error_pct") if b else math.nan,
+                b.m("time_ms") if b else math.nan,
+                h.m("e_RT") if h else math.nan,
+                h.m("T_error_pct") if h else math.nan,
+                h.m("time_ms") if h else math.nan,
+                c.info.label if c else "",
+                c.m("e_RT") if c else math.nan,
+                c.m("T_error_pct") if c else math.nan,
+                c.m("time_ms") if c else math.nan,
+            ]
+        )
+    if not rows:
+        return
+    ctx.md += [
+        "## Headline",
+        "",
+        "Best proposed combination (lowest mean e^RT over the GCC + filter combinations), "
+        "HoD-S/αβ (Paper 1's usual pick) and the best competitor (Paper 1's six and the "
+        "[baselines] extra) per scenario; e^RT in m² + deg² (mean ± std over seeds), T_error "
+        "in %, t in ms per frame.",
+        "",
+        _md_table(
+            [
+                "scenario",
+                "best proposed",
+                "e^RT",
+                "T_err %",
+                "t ms",
+                "HoD-S/αβ e^RT",
+                "T_err %",
+                "t ms",
+                "best competitor",
+                "e^RT",
+                "T_err %",
+                "t ms",
+            ],
+            rows,
+        ),
+        "",
+    ]
+    ctx.tables.append(
+        _write_csv(
+            ctx.out / "tables" / "headline.csv",
+            [
+                "scenario",
+                "best_proposed",
+                "e_RT",
+                "T_error_pct",
+                "time_ms",
+                "hods_alphabeta_e_RT",
+                "hods_alphabeta_T_error_pct",
+                "hods_alphabeta_time_ms",
+                "best_competitor",
+                "competitor_e_RT",
+                "competitor_T_error_pct",
+                "competitor_time_ms",
+            ],
+            csv_rows,
+        )
+    )
 
 
 def _section_normalised_placeholder(ctx: _Ctx) -> dict[str, Any]:

@@ -30,6 +30,39 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _MARKERS = ["o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h"]
+# 20 distinguishable colours: the dark then the light half of matplotlib's tab20
+_TAB20 = [
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+    "#aec7e8",
+    "#ffbb78",
+    "#98df8a",
+    "#ff9896",
+    "#c5b0d5",
+    "#c49c94",
+    "#f7b6d2",
+    "#c7c7c7",
+    "#dbdb8d",
+    "#9edae5",
+]
+
+
+def _style(i: int) -> dict[str, object]:
+    """Colour, marker and line style of series ``i`` (distinct for the first 40)."""
+    return {
+        "color": _TAB20[i % len(_TAB20)],
+        "linestyle": "-" if (i // len(_TAB20)) % 2 == 0 else "--",
+    }
+
+
 _GT = {"color": "black", "linestyle": "--", "linewidth": 1.6, "label": "ground truth"}
 
 
@@ -101,7 +134,8 @@ def plot_trajectory_panels(
             ax.plot(gt[0, a], gt[0, b], "ko", markersize=5)
             for i, (name, xyz) in enumerate(est.items()):
                 p = np.asarray(xyz, dtype=np.float64)
-                ax.plot(p[:, a], p[:, b], linewidth=1.2, label=name, marker=None)
+                st = _style(i)
+                ax.plot(p[:, a], p[:, b], linewidth=1.2, label=name, **st)
                 ax.plot(
                     p[-1, a],
                     p[-1, b],
@@ -168,20 +202,27 @@ def plot_axis_errors(
     fig = _figure(10.0, 8.5)
     axes = fig.subplots(4, 1, sharex=True)
     labels = ["Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
-    for name, (delta, rot) in errors.items():
+    for j, (name, (delta, rot)) in enumerate(errors.items()):
         d = np.asarray(delta)
         if d.shape != (len(x), 3) or np.shape(rot) != (len(x),):
             raise InputError(f"plot_axis_errors: {name!r} does not match {len(x)} frames")
+        st = _style(j)
         for i in range(3):
-            axes[i].plot(x, d[:, i], linewidth=1.1, label=name)
-        axes[3].plot(x, rot, linewidth=1.1, label=name)
+            axes[i].plot(x, d[:, i], linewidth=1.1, label=name, **st)
+        axes[3].plot(x, rot, linewidth=1.1, label=name, **st)
     for ax, lab in zip(axes, labels, strict=True):
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
     for ax in axes[:3]:
         ax.axhline(0.0, color="black", linewidth=0.6)
     axes[-1].set_xlabel("frame")
-    axes[0].legend(fontsize="small", ncol=min(3, len(errors)), loc="upper left")
+    axes[-1].xaxis.get_major_locator().set_params(integer=True)
+    fig.legend(
+        *axes[0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=min(3, len(errors)),
+        fontsize="small",
+    )
     fig.suptitle(title or "Error with respect to the ground truth (GT − estimate)")
     return _save(fig, path, dpi)
 
@@ -213,7 +254,7 @@ def plot_normalised_ert_vs_time(
     desc = list(dict.fromkeys(p[1] for p in pts))
     fig = _figure(9.5, 6.0)
     ax = fig.subplots()
-    colors = [f"C{i % 10}" for i in range(len(scen))]
+    colors = [_TAB20[i % len(_TAB20)] for i in range(len(scen))]
     for s, d, t, v in pts:
         ax.scatter(
             t,
@@ -239,17 +280,8 @@ def plot_normalised_ert_vs_time(
         Line2D([], [], color="gray", marker=_MARKERS[i % len(_MARKERS)], linestyle="", label=d)
         for i, d in enumerate(desc)
     ]
-    leg = ax.legend(
-        handles=h1, title="scenario", fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0)
-    )
-    ax.add_artist(leg)
-    ax.legend(
-        handles=h2,
-        title="descriptor",
-        fontsize="small",
-        loc="lower left",
-        bbox_to_anchor=(1.01, 0.0),
-    )
+    fig.legend(handles=h1, title="scenario", fontsize="small", loc="outside right upper")
+    fig.legend(handles=h2, title="descriptor", fontsize="small", loc="outside right lower")
     ax.set_title(title or "Normalised e^RT (mean over filters) vs processing time")
     return _save(fig, path, dpi)
 
@@ -272,30 +304,37 @@ def plot_time_vs_points(
         raise InputError("plot_time_vs_points: nothing to plot")
     fig = _figure(9.5, 6.0)
     ax = fig.subplots()
-    annotated: set[str] = set()
+    scen_x: dict[str, float] = {}
     for i, (name, pts) in enumerate(series.items()):
         good = sorted(p for p in pts if math.isfinite(p[0]) and math.isfinite(p[1]) and p[1] > 0)
         if not good:
             continue
         xs, ys = [p[0] for p in good], [p[1] for p in good]
-        ax.plot(xs, ys, marker=_MARKERS[i % len(_MARKERS)], linewidth=1.2, label=name)
-        for x, y, s in good:
-            if s not in annotated:
-                ax.annotate(
-                    s,
-                    (x, y),
-                    textcoords="offset points",
-                    xytext=(4, -10),
-                    fontsize="x-small",
-                    color="dimgray",
-                )
-                annotated.add(s)
+        st = _style(i)
+        if name == name.lower():  # method strings (competitors) dashed, descriptors solid
+            st["linestyle"] = "--"
+        ax.plot(xs, ys, marker=_MARKERS[i % len(_MARKERS)], linewidth=1.2, label=name, **st)
+        for x, _, sc in good:
+            scen_x.setdefault(sc, x)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    for sc, x in scen_x.items():
+        ax.axvline(x, color="gray", linestyle=":", linewidth=0.8)
+        ax.text(
+            x,
+            0.99,
+            f"{sc} ",
+            transform=ax.get_xaxis_transform(),
+            rotation=90,
+            va="top",
+            ha="right",
+            fontsize="x-small",
+            color="dimgray",
+        )
     ax.set_xlabel("mean points per scan")
     ax.set_ylabel("mean time per frame [ms]")
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize="small", loc="center left", bbox_to_anchor=(1.01, 0.5))
+    fig.legend(*ax.get_legend_handles_labels(), fontsize="small", loc="outside right center")
     ax.set_title(title or "Processing time vs scan cardinality")
     return _save(fig, path, dpi)
 
@@ -326,13 +365,26 @@ def plot_filter_scores(
     for i, n in enumerate(names):
         vals = np.array([scores[s].get(n, np.nan) for s in scen], dtype=float)
         vals[~(np.isfinite(vals) & (vals > 0))] = np.nan
-        ax.bar(x - 0.4 + (i + 0.5) * w, vals, width=w, label=n, edgecolor="black", linewidth=0.4)
+        ax.bar(
+            x - 0.4 + (i + 0.5) * w,
+            vals,
+            width=w,
+            label=n,
+            edgecolor="black",
+            linewidth=0.4,
+            color=_TAB20[i % len(_TAB20)],
+        )
     ax.set_xticks(x, scen, rotation=20, ha="right")
     ax.set_yscale("log")
     ax.set_ylabel(ylabel)
     ax.set_xlabel("scenario")
     ax.grid(True, axis="y", which="both", alpha=0.25)
-    ax.legend(fontsize="small", title="filter", loc="center left", bbox_to_anchor=(1.01, 0.5))
+    fig.legend(
+        *ax.get_legend_handles_labels(),
+        fontsize="small",
+        title="filter",
+        loc="outside right center",
+    )
     ax.set_title(title or "Normalised e^RT per filter (mean over descriptors)")
     return _save(fig, path, dpi)
 
@@ -377,6 +429,7 @@ def plot_nuisance_curves(
                 linewidth=1.2,
                 capsize=3,
                 label=m,
+                **_style(i),
             )
         if logy:
             ax.set_yscale("log")
@@ -384,7 +437,7 @@ def plot_nuisance_curves(
         ax.set_ylabel(ylabel)
         ax.set_title(s)
         ax.grid(True, which="both", alpha=0.25)
-    axes[-1].legend(fontsize="small", loc="center left", bbox_to_anchor=(1.02, 0.5))
+    fig.legend(*axes[-1].get_legend_handles_labels(), fontsize="small", loc="outside right center")
     if title:
         fig.suptitle(title)
     return _save(fig, path, dpi)

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from relnav._threads import limit_blas_threads
 from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
 from relnav.registration.base import Registration
 from relnav.types import Scan
@@ -116,6 +117,7 @@ def run_sequence(
     motion_prior: MotionPrior = "constant_velocity",
     max_frames: int | None = None,
     progress: Callable[[int, OdometryStep], None] | None = None,
+    blas_threads: int | None = 1,
     **method_options: Any,
 ) -> OdometryRun:
     """Run frame-to-frame odometry over ``sequence``.
@@ -134,6 +136,9 @@ def run_sequence(
         Stop after this many frames.
     progress : callable, optional
         Called as ``progress(i, step)`` after each frame (the CLI draws its progress bar with it).
+    blas_threads : int or None
+        BLAS threads during the run (default 1: small per-frame linear algebra is slower
+        multi-threaded; see :mod:`relnav._threads`). ``None`` leaves the setting alone.
     **method_options
         Passed to the registration factory.
 
@@ -152,13 +157,14 @@ def run_sequence(
     odo = Odometry(method, initial_pose=T0, motion_prior=motion_prior, **method_options)
     steps: list[OdometryStep] = []
     times = np.zeros(n)
-    for i in range(n):
-        scan = sequence[i]
-        times[i] = scan.time if isinstance(scan, Scan) else float(i)
-        step = odo.register_frame(scan)
-        steps.append(step)
-        if progress is not None:
-            progress(i, step)
+    with limit_blas_threads(blas_threads):
+        for i in range(n):
+            scan = sequence[i]
+            times[i] = scan.time if isinstance(scan, Scan) else float(i)
+            step = odo.register_frame(scan)
+            steps.append(step)
+            if progress is not None:
+                progress(i, step)
     poses = np.stack([s.pose for s in steps]) if steps else np.zeros((0, 4, 4))
     name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
     run = OdometryRun(
