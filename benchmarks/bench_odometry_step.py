@@ -104,7 +104,7 @@ def main() -> None:
                 _, rot, tr, _, flagged, step = step_stats(seq, k0, "svd", opts, args.pairs)
                 print(
                     f"{preset:12} {n:6.0f} {name:10} {ms:9.1f} {paper_ms:9.0f} "
-                    f"{paper_ms / ms:9.1f} {rot:10.2f} {tr:10.3f}",
+                    f"{paper_ms / ms:9.1f} {rot:10.2f} {tr:10.3f} {flagged:8d} {step:6.2f}",
                     flush=True,
                 )
 
