@@ -201,3 +201,70 @@ def test_paper_reference_tables():
     assert len(b1) == 35 and b1[("sim-bennu", "icp-plane")].e_RT[0] == 5e14
     with pytest.raises(InputError):
         ref.appendix_table("sim-mars")
+
+
+def test_export_report_compresses_figures(bench, tmp_path):
+    from relnav.eval.report import export_report
+
+    md = export_report(bench, tmp_path / "docs")
+    text = md.read_text()
+    assert "Tables (in the benchmark folder)" in text
+    pngs = sorted((tmp_path / "docs" / "figures").glob("*.png"))
+    assert pngs and all(f"figures/{p.name}" in text for p in pngs)
+    src = sum((bench / "figures" / p.name).stat().st_size for p in pngs)
+    assert sum(p.stat().st_size for p in pngs) < 0.7 * src
+
+
+def test_cli_benchmark_and_report(tmp_path):
+    import typer
+    import yaml
+    from typer.testing import CliRunner
+
+    from relnav.cli.benchmark import register
+
+    app = typer.Typer()
+    register(app)
+    grid = tmp_path / "g.yaml"
+    grid.write_text(yaml.safe_dump({**GRID, "methods": ["icp-point", "icp-x84"], "seeds": 1}))
+    out = tmp_path / "out"
+    r = CliRunner().invoke(
+        app,
+        [
+            "benchmark",
+            str(grid),
+            "--out",
+            str(out),
+            "--workers",
+            "0",
+            "--max-frames",
+            "2",
+            "--method",
+            "icp-p*",
+            "--dry-run",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert "1 jobs" in r.output and not (out / "results.sqlite").exists()
+    r = CliRunner().invoke(
+        app, ["benchmark", str(grid), "--out", str(out), "--workers", "0", "--max-frames", "2"]
+    )
+    assert r.exit_code == 0, r.output
+    assert "2 ok, 0 failed" in r.output and (out / "report.md").is_file()
+    r = CliRunner().invoke(
+        app,
+        [
+            "benchmark",
+            str(grid),
+            "--out",
+            str(out),
+            "--workers",
+            "0",
+            "--max-frames",
+            "2",
+            "--no-report",
+        ],
+    )
+    assert "2 already finished" in r.output
+    r = CliRunner().invoke(app, ["report", str(out), "--export", str(tmp_path / "exp")])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "exp" / "report.md").is_file()

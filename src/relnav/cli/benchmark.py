@@ -127,16 +127,23 @@ def report(
     grid: Path = typer.Option(
         None, "--grid", help="Report on this grid's jobs instead of the folder's grid.yaml."
     ),
+    export: Path = typer.Option(
+        None, "--export", help="Also copy report.md + compressed figures to this folder."
+    ),
 ) -> None:
     """(Re)write OUT/report.md, OUT/tables/*.csv and OUT/figures/*.png from the results store.
 
-    Example: [bold]relnav report bench/quick[/]
+    Examples: [bold]relnav report bench/quick[/],
+    [bold]relnav report bench/full --export docs/results/paper1-full[/]
     """
     from relnav.eval.benchmark import load_grid
-    from relnav.eval.report import write_report
+    from relnav.eval.report import export_report, write_report
 
     p = write_report(out, grid=None if grid is None else load_grid(grid))
     console.print(f"wrote {p}", highlight=False)
+    if export is not None:
+        q = export_report(out, export)
+        console.print(f"exported {q}", highlight=False)
 
 
 def register(app: typer.Typer) -> None:

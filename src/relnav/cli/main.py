@@ -37,6 +37,7 @@ COMMAND_MODULES = [
     "evaluate",
     "methods",
     "config_cmd",
+    "fuse",
     "track",
 ]
 

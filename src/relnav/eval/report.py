@@ -58,6 +58,7 @@ __all__ = [
     "MethodInfo",
     "aggregate",
     "classify_method",
+    "export_report",
     "normalised_ert",
     "write_report",
 ]
@@ -1595,6 +1596,38 @@ def _section_headline(ctx: _Ctx, summary: dict[str, Any]) -> None:
             csv_rows,
         )
     )
+
+
+def export_report(out_dir: str | Path, dest: str | Path, *, colors: int = 256) -> Path:
+    """Copy ``report.md`` and its figures to ``dest`` (markdown + small PNGs, e.g. for git).
+
+    The PNGs are re-encoded with a ``colors``-entry palette (Pillow), typically 3–4× smaller
+    with no visible change for line plots. CSV tables stay in the benchmark folder.
+
+    Returns
+    -------
+    Path
+        ``dest/report.md``.
+    """
+    from PIL import Image
+
+    src = Path(out_dir)
+    md = src / "report.md"
+    if not md.is_file():
+        raise InputError(f"{src}: no report.md (run `relnav report {src}` first)")
+    dst = Path(dest)
+    (dst / "figures").mkdir(parents=True, exist_ok=True)
+    text = md.read_text()
+    for png in sorted((src / "figures").glob("*.png")):
+        if f"figures/{png.name}" not in text:
+            continue
+        with Image.open(png) as im:
+            im.convert("RGB").quantize(colors=colors, dither=Image.Dither.NONE).save(
+                dst / "figures" / png.name, optimize=True
+            )
+    text = text.replace("Tables: `tables/", "Tables (in the benchmark folder): `tables/")
+    (dst / "report.md").write_text(text)
+    return dst / "report.md"
 
 
 def _section_normalised_placeholder(ctx: _Ctx) -> dict[str, Any]:

@@ -73,14 +73,9 @@ def register_method(
 
 
 def _load_all() -> None:
-    import importlib
-
-    for mod in ("feature", "clgv", "icp", "sparse_icp", "super4pcs", "external"):
-        try:
-            importlib.import_module(f"relnav.registration.{mod}")
-        except ModuleNotFoundError as e:  # family not written yet in this build
-            if e.name != f"relnav.registration.{mod}":
-                raise
+    # Importing a family module registers its methods.
+    from relnav.fusion import cbd, cross_source  # noqa: F401
+    from relnav.registration import clgv, external, feature, icp, sparse_icp, super4pcs  # noqa: F401
 
 
 def available_methods() -> dict[str, dict[str, Any]]:
