@@ -73,13 +73,56 @@ def _consistency_bits(s: np.ndarray, m: np.ndarray, eps: float, strict: bool) ->
 
 
 @njit(cache=True)
+def _grow(
+    bits: np.ndarray,
+    i: int,
+    first: int,
+    taken_bits: np.ndarray,
+    pcl_bug: bool,
+    mask: np.ndarray,
+    cur: np.ndarray,
+) -> int:
+    """Grow the greedy cluster of seed ``i`` into ``cur``; returns its size.
+
+    Candidates are visited in ascending sorted position; a candidate joins when it is
+    consistent with every member (the running AND of the members' rows in ``mask``) and is not
+    in ``taken_bits``. Whole words of inconsistent/taken candidates are skipped at once.
+    ``first`` is the row the mask starts from (``i``, or 0 for the PCL ≤ 1.8 bug, which also
+    ANDs row ``size − 1`` instead of the new member's row).
+    """
+    W = bits.shape[1]
+    one = np.uint64(1)
+    for w in range(W):
+        mask[w] = bits[first, w]
+    cur[0] = i
+    size = 1
+    for w in range(W):
+        x = mask[w] & ~taken_bits[w]
+        if x == 0:
+            continue
+        lo = w * 64
+        for b in range(64):
+            if (x >> np.uint64(b)) & one:
+                j = lo + b
+                if j == i:
+                    continue
+                cur[size] = j
+                size += 1
+                row = size - 1 if pcl_bug else j
+                for v in range(w, W):  # earlier words are no longer looked at
+                    mask[v] &= bits[row, v]
+                x = mask[w] & ~taken_bits[w]
+                if b == 63 or (x >> np.uint64(b + 1)) == 0:
+                    break
+    return size
+
+
+@njit(cache=True)
 def _greedy_clusters(bits: np.ndarray, min_size: int, pcl_bug: bool):
     """Greedy GCC over sorted correspondences; returns (cluster sizes, member order).
 
     ``members`` lists the kept clusters' indices one cluster after the other, each in the
-    order its members were added (seed first); ``sizes`` gives the length of each. Candidates
-    are visited in ascending sorted position, whole words of inconsistent/taken candidates
-    being skipped at once.
+    order its members were added (seed first); ``sizes`` gives the length of each.
     """
     n, W = bits.shape
     taken = np.zeros(n, dtype=np.bool_)
@@ -95,29 +138,7 @@ def _greedy_clusters(bits: np.ndarray, min_size: int, pcl_bug: bool):
         if taken[i]:
             continue
         # PCL <= 1.8 compares a candidate against sorted entries 0..|C|-1, not the members.
-        first = 0 if pcl_bug else i
-        for w in range(W):
-            mask[w] = bits[first, w]
-        cur[0] = i
-        size = 1
-        for w in range(W):
-            x = mask[w] & ~taken_bits[w]
-            if x == 0:
-                continue
-            lo = w * 64
-            for b in range(64):
-                if (x >> np.uint64(b)) & one:
-                    j = lo + b
-                    if j == i:
-                        continue
-                    cur[size] = j
-                    size += 1
-                    row = size - 1 if pcl_bug else j
-                    for v in range(w, W):  # earlier words are no longer looked at
-                        mask[v] &= bits[row, v]
-                    x = mask[w] & ~taken_bits[w]
-                    if b == 63 or (x >> np.uint64(b + 1)) == 0:
-                        break
+        size = _grow(bits, i, 0 if pcl_bug else i, taken_bits, pcl_bug, mask, cur)
         if size > min_size:
             for c in range(size):
                 k = cur[c]
@@ -134,39 +155,19 @@ def _greedy_clusters(bits: np.ndarray, min_size: int, pcl_bug: bool):
 def _best_cluster_all_seeds(bits: np.ndarray, min_size: int) -> np.ndarray:
     """Largest greedy cluster over EVERY seed (members may be shared between seeds).
 
-    For each seed ``i`` (ascending sorted position) the cluster is grown exactly as in
-    :func:`_greedy_clusters`, but no correspondence is ever marked as taken, so a wrong
-    early seed can no longer claim (and split) the true cluster. Returns the members of the
-    largest cluster (first found on ties), empty if none exceeds ``min_size``.
+    Each seed's cluster is grown exactly as in :func:`_greedy_clusters`, but nothing is ever
+    marked as taken, so a wrong early seed can no longer claim (and split) the true cluster.
+    Returns the members of the largest cluster (first found on ties), empty if none exceeds
+    ``min_size``.
     """
     n, W = bits.shape
+    none_taken = np.zeros(W, dtype=np.uint64)
     mask = np.empty(W, dtype=np.uint64)
     cur = np.empty(n, dtype=np.int64)
     best = np.empty(n, dtype=np.int64)
     best_size = 0
-    one = np.uint64(1)
     for i in range(n):
-        for w in range(W):
-            mask[w] = bits[i, w]
-        cur[0] = i
-        size = 1
-        for w in range(W):
-            x = mask[w]
-            if x == 0:
-                continue
-            lo = w * 64
-            for b in range(64):
-                if (x >> np.uint64(b)) & one:
-                    j = lo + b
-                    if j == i:
-                        continue
-                    cur[size] = j
-                    size += 1
-                    for v in range(w, W):
-                        mask[v] &= bits[j, v]
-                    x = mask[w]
-                    if b == 63 or (x >> np.uint64(b + 1)) == 0:
-                        break
+        size = _grow(bits, i, i, none_taken, False, mask, cur)
         if size > best_size:
             best_size = size
             best[:size] = cur[:size]
