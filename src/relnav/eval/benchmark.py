@@ -28,7 +28,12 @@ Determinism: a job is a pure function of (scenario spec, seed, nuisance, method,
 the scenario seed drives the sensor noise and pointing jitter, the nuisance draws use
 :func:`relnav.sim.nuisance.nuisance_rng`, and the methods' own random parts (RANSAC, CLGV,
 Super4PCS, Open3D) keep their fixed default seeds **[interpretation: the Monte Carlo seed varies
-the data, not the estimator]**. Only the timing columns differ between runs.
+the data, not the estimator]**. Only the timing columns differ between runs, except for
+the Open3D-based baselines (``o3d-*``): Open3D's parallel reductions and RANSAC are not
+bit-reproducible from one process to another (differences from 1e-12 relative up to ~1 %
+after a few frames of ``o3d-fpfh-ransac``). Every relnav-native method, KISS-ICP and
+small_gicp give bit-identical metrics in-process, on a ``LocalCluster`` or on hand-started
+``dask worker`` processes.
 
 On a cluster, ``OUT`` should be on a shared file system; otherwise every worker simulates the
 sequences it needs itself (same seeds → same data) and the estimate files stay on the workers.
@@ -814,7 +819,7 @@ def run_job(job: dict[str, Any], out_root: str, sequence_dir: str | None = None)
 
 
 def _worker_setup() -> dict[str, Any]:
-    """Run on every worker once: report where numba caches (checked writable)."""
+    """Run on every worker once: its pid and numba's cache setting (logged at INFO)."""
     import numba
 
     cache_dir = numba.config.CACHE_DIR or "(next to the sources / user cache)"
@@ -912,6 +917,11 @@ def run_benchmark(
     Returns
     -------
     BenchmarkSummary
+
+    Notes
+    -----
+    Local workers are separate processes started with ``spawn``: a script calling this
+    function must guard its entry point with ``if __name__ == "__main__":``.
     """
     from relnav.eval.store import ResultsStore
 
@@ -926,6 +936,7 @@ def run_benchmark(
     gh = grid.grid_hash()
     t0 = time.perf_counter()
     started = _now()
+    load0 = _loadavg()
     with ResultsStore(out / STORE_FILE) as store:
         store.set_meta("last_grid_hash", gh)
         if force:
@@ -982,10 +993,20 @@ def run_benchmark(
                 "n_ok": summary.n_ok,
                 "n_failed": summary.n_failed,
                 "completed": summary.n_ok + summary.n_failed == len(pending),
+                "load_avg_start": load0,
+                "load_avg_end": _loadavg(),
             }
             with (out / RUNS_LOG).open("a") as f:
                 f.write(json.dumps(info) + "\n")
     return summary
+
+
+def _loadavg() -> float | None:
+    """1-minute load average (None where unavailable): how shared the machine was."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (AttributeError, OSError):
+        return None
 
 
 def _run_serial(pending: list[Job], out: Path, record: Callable[[dict[str, Any]], None]) -> None:

@@ -501,14 +501,27 @@ def _section_summary(ctx: _Ctx) -> None:
         f"- relnav version(s): {', '.join(versions) or '—'}",
     ]
     if runs:
-        execs = sorted({f"{r['executor']} ({r['n_workers']} workers)" for r in runs})
-        hosts = sorted(
-            {f"{r['host']} ({r['cpu_count']} CPUs, {r['cpu']}, Python {r['python']})" for r in runs}
+        execs = sorted(
+            {f"{r.get('executor', '?')} ({r.get('n_workers', '?')} workers)" for r in runs}
         )
+        hosts = sorted(
+            {
+                f"{r.get('host', '?')} ({r.get('cpu_count', '?')} CPUs, {r.get('cpu', '?')}, "
+                f"Python {r.get('python', '?')})"
+                for r in runs
+            }
+        )
+        loads = [r[k] for r in runs for k in ("load_avg_start", "load_avg_end") if r.get(k)]
         ctx.md += [
             f"- wall time: {wall / 60:.1f} min over {len(runs)} invocation(s) of "
             f"`relnav benchmark` ({', '.join(execs)})",
-            f"- machine: {'; '.join(hosts)}",
+            f"- machine: {'; '.join(hosts)}"
+            + (
+                f"; 1-min load average {min(loads):.1f}–{max(loads):.1f} at start/end "
+                "(shared machine: times are pessimistic)"
+                if loads and max(loads) > 1.5 * max(1, int(runs[0].get("n_workers") or 1))
+                else ""
+            ),
         ]
     ctx.md += [
         "",

@@ -8,6 +8,7 @@ from relnav.features.base import (
     get_descriptor,
     register_descriptor,
 )
+from relnav.features.keypoints import select_keypoints, voxel_downsample
 
 __all__ = [
     "MIN_SUPPORT",
@@ -16,4 +17,6 @@ __all__ = [
     "compute",
     "get_descriptor",
     "register_descriptor",
+    "select_keypoints",
+    "voxel_downsample",
 ]

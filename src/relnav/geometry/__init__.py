@@ -1,5 +1,13 @@
 """Geometry core: SE(3), rotations, neighbourhoods, normals and local reference frames."""
 
+from relnav.geometry.dualquat import (
+    cayley,
+    cayley_inverse,
+    dq_from_matrix,
+    dq_multiply,
+    dq_to_matrix,
+)
+from relnav.geometry.lrf import radius_search, rops_lrf, shot_lrf
 from relnav.geometry.neighbors import build_tree, knn, mean_resolution, radius_neighbors
 from relnav.geometry.normals import estimate_normals, local_covariances
 from relnav.geometry.rotations import (
@@ -31,6 +39,14 @@ from relnav.geometry.se3 import (
 
 __all__ = [
     "angle_between_rotations",
+    "cayley",
+    "cayley_inverse",
+    "dq_from_matrix",
+    "dq_multiply",
+    "dq_to_matrix",
+    "radius_search",
+    "rops_lrf",
+    "shot_lrf",
     "build_tree",
     "compose",
     "estimate_normals",
