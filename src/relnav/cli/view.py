@@ -111,13 +111,25 @@ def view(
     sensor: str | None = typer.Option(
         None, "--sensor", help="Second sensor's name (scans_<name>/); default the primary."
     ),
+    rrd: Path | None = typer.Option(
+        None, "--rrd", help="Also write every scan to a Rerun recording (extra [viz])."
+    ),
+    estimate: list[Path] | None = typer.Option(
+        None, "--estimate", help="Estimated TUM trajectory to add to the .rrd (repeatable)."
+    ),
 ) -> None:
     """Draw a few scans mapped into the target frame with the ground truth, and the sensor path.
 
-    Example: [bold]relnav view seq --out seq.png --frames 8[/]
+    Example: [bold]relnav view seq --out seq.png --frames 8 --rrd seq.rrd[/]
     """
     render_sequence(folder, out, frames=frames, sensor=sensor)
     console.print(f"wrote {out}")
+    if rrd is not None:
+        from relnav.eval.rerun_export import export_rrd
+        from relnav.io.trajectories import read_tum
+
+        est = {p.stem: read_tum(p)[1] for p in estimate or []}
+        console.print(f"wrote {export_rrd(folder, rrd, estimates=est, sensor=sensor)}")
 
 
 def register(app: typer.Typer) -> None:

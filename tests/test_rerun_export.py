@@ -1,0 +1,32 @@
+"""The optional Rerun export (extra [viz]): skipped when rerun-sdk is not installed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from relnav.io.sequences import write_sequence
+
+
+def test_export_rrd_writes_a_recording(tmp_path, rng):
+    pytest.importorskip("rerun")
+    from relnav.eval.rerun_export import export_rrd
+
+    scans = [rng.normal(size=(50, 3)) for _ in range(3)]
+    poses = np.stack([np.eye(4)] * 3)
+    write_sequence(tmp_path / "seq", scans, [0.0, 1.0, 2.0], gt_poses=poses)
+    out = export_rrd(tmp_path / "seq", tmp_path / "seq.rrd", estimates={"est": poses})
+    data = out.read_bytes()
+    assert data[:3] == b"RRF"  # Rerun's file magic
+    assert len(data) > 1000
+
+
+def test_export_rrd_without_rerun_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    from relnav.errors import ConfigError
+    from relnav.eval.rerun_export import export_rrd
+
+    monkeypatch.setitem(sys.modules, "rerun", None)
+    with pytest.raises(ConfigError, match=r"relnav\[viz\]"):
+        export_rrd(tmp_path, tmp_path / "x.rrd")
