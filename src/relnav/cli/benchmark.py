@@ -47,7 +47,7 @@ def benchmark(
 
     [bold]relnav benchmark configs/paper1-quick.yaml --out bench/quick[/]
 
-    [bold]relnav benchmark configs/paper1-full.yaml --out bench/full --seeds 1 --max-frames 60[/]
+    [bold]relnav benchmark configs/paper1-full.yaml --out bench/full --seeds 1 --max-frames 20[/]
 
     [bold]relnav benchmark grid.yaml --out bench/x --scheduler tcp://10.0.0.5:8786[/]
     """

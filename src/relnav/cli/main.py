@@ -39,6 +39,7 @@ COMMAND_MODULES = [
     "config_cmd",
     "fuse",
     "track",
+    "benchmark",
 ]
 
 

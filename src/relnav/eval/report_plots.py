@@ -318,11 +318,11 @@ def plot_time_vs_points(
             scen_x.setdefault(sc, x)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    for sc, x in scen_x.items():
+    for k, (sc, x) in enumerate(sorted(scen_x.items(), key=lambda kv: kv[1])):
         ax.axvline(x, color="gray", linestyle=":", linewidth=0.8)
         ax.text(
             x,
-            0.99,
+            0.99 - 0.14 * (k % 3),  # staggered so close cardinalities stay readable
             f"{sc} ",
             transform=ax.get_xaxis_transform(),
             rotation=90,
