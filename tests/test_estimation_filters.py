@@ -127,7 +127,7 @@ def sorted_problem():
 def test_kernels_match_dense_numpy_reference(name, opts, sorted_problem):
     src, tgt, corr = sorted_problem
     a, b = tgt[corr.tgt_idx], src[corr.src_idx]  # a ∈ P_k (target) builds H, ψ = b ∈ P_{k+1}
-    est = get_estimator(name, **opts)
+    est = get_estimator(name, **{"center": False, **opts})  # the raw-coordinate kernels
     m = adaptive_factors(corr.distance, est.adaptive, scale=est.m_scale, m_min=est.m_min)
     lit = est.paper_literal
     if name == "kalman":
@@ -153,7 +153,7 @@ def test_kalman_covariance_matches_reference_P(sorted_problem):
     a, b = tgt[corr.tgt_idx], src[corr.src_idx]
     m = adaptive_factors(corr.distance, "per_match")
     x_ref, P_ref = _ref_kalman(a, b, m, 1.0, 5e-3, 1.0, False)
-    e = get_estimator("kalman").estimate(src, tgt, corr)
+    e = get_estimator("kalman", center=False).estimate(src, tgt, corr)
     np.testing.assert_allclose(
         e.covariance, state_covariance_to_twist(x_ref, P_ref), rtol=1e-6, atol=1e-9
     )
@@ -201,11 +201,13 @@ DEFAULT_TOLERANCE = {
 
 
 @pytest.mark.parametrize("name", FILTERS)
-def test_paper_defaults_on_small_realistic_motion(name):
+def test_paper_gains_in_raw_coordinates_on_small_realistic_motion(name):
+    """Paper 1's gains on raw sensor-frame coordinates (``center=False``, SDRE σ_w = 5e-3)."""
     rot_err, trans_err = [], []
     for seed in range(10):
         src, tgt, corr, T = _realistic(seed)
-        est = get_estimator(name).estimate(src, tgt, corr)
+        raw = {"center": False} | ({"sigma_w_sdre": 5e-3} if name == "sdre" else {})
+        est = get_estimator(name, **raw).estimate(src, tgt, corr)
         assert est.status == "ok"
         r, t = _errors(est.T_target_source, T)
         rot_err.append(r)
@@ -225,7 +227,8 @@ def test_paper_defaults_improve_with_more_correspondences():
     errs = []
     for n in (50, 500):
         src, tgt, corr, T = _realistic(0, n=n)
-        errs.append(_errors(get_estimator("kalman").estimate(src, tgt, corr).T_target_source, T))
+        kalman = get_estimator("kalman", center=False)
+        errs.append(_errors(kalman.estimate(src, tgt, corr).T_target_source, T))
     assert errs[1][0] < 0.5 * errs[0][0]
     assert errs[1][1] < errs[0][1]
 
@@ -295,7 +298,7 @@ def test_sdre_gain_dependence_on_adaptive_factor():
     est = get_estimator("sdre", sigma_w_sdre=0.5)
     _, g = est.gains(np.array([1e-3, 1.0, 100.0]))
     assert g[1] > 0.1 and g[0] < 1e-3 and g[2] < 1e-2
-    _, g_paper = get_estimator("sdre").gains(np.array([1.0]))
+    _, g_paper = get_estimator("sdre", sigma_w_sdre=5e-3).gains(np.array([1.0]))
     assert 1e-5 < g_paper[0] < 1e-4  # Paper 1's σ_w = 5e-3: tiny gain
 
 
@@ -428,3 +431,31 @@ def test_kalman_hinf_literal_shrink_towards_model_scale(name):
     m_sum = 10.0 * corr.distance.sum()  # ≈ 94
     # ‖R̂‖_F ≈ ‖R‖_F / M = √3 / M (the SO(3) projection is scale-free, so R is still usable)
     assert 0.8 * np.sqrt(3) < np.linalg.norm(x[:9]) * m_sum < 1.2 * np.sqrt(3)
+
+
+# Coherent defaults (centred points; SDRE σ_w = 0.5), same problems as above, worst of 10 seeds
+# (measured: kalman/hinf ≤ 0.232°, ≤ 3.4 cm; alphabeta ≤ 0.92°, sdre ≤ 0.88°, ≤ 26 cm — one NLMS
+# sweep of 50 updates recovers ≈ 65 % of the rotation; the residual rotation error, lever-armed
+# by the 10 m range through t = b̄ − R̂ā, dominates the translation error).
+COHERENT_TOLERANCE = {
+    "kalman": (0.25, 0.035),
+    "hinf": (0.25, 0.035),
+    "alphabeta": (1.0, 0.27),
+    "sdre": (1.0, 0.27),
+}
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_coherent_defaults_on_small_realistic_motion(name):
+    rot_err, trans_err = [], []
+    for seed in range(10):
+        src, tgt, corr, T = _realistic(seed)
+        est = get_estimator(name).estimate(src, tgt, corr)
+        assert est.status == "ok"
+        r, t = _errors(est.T_target_source, T)
+        rot_err.append(r)
+        trans_err.append(t)
+    rot_tol, trans_tol = COHERENT_TOLERANCE[name]
+    assert max(rot_err) < rot_tol
+    assert max(trans_err) < trans_tol
+    assert np.mean(rot_err) < 0.5 * 2.0  # recovers more than half of the 2° rotation

@@ -538,13 +538,17 @@ class RecursiveEstimator:
     covariance : {"filter", "residual", "none"}
         ``filter``: map the 12×12 state covariance (Kalman, H∞ only);
         ``residual``: Gauss–Newton covariance from the post-fit residuals.
-    center : bool
-        Extension (default False = Paper 1): run the filter on centred points
-        ``a − ā``, ``b − b̄`` and map back with ``t = t_c + b̄ − R̂ ā`` (``R̂`` the raw 3×3 block,
-        before projection; ``P`` mapped by the same linear map). Decouples rotation and
-        translation, which makes the NLMS-type filters (αβ, SDRE) converge far faster when the
-        target is far from the sensor origin, and removes the prior-induced rotation/translation
-        coupling of Kalman/H∞.
+    center : bool, optional
+        Run the filter on centred points ``a − ā``, ``b − b̄`` and map back with
+        ``t = t_c + b̄ − R̂ ā`` (``R̂`` the raw 3×3 block, before projection; ``P`` mapped by the
+        same linear map). **[interpretation]** Default: ``True`` for the coherent filters,
+        ``False`` with ``paper_literal=True``. Paper 1 writes the filters on raw coordinates;
+        there, the conditioning depends on where the target is in the sensor frame: with the
+        target tens of metres away, one sweep of αβ/SDRE barely leaves the identity and
+        Kalman/H∞'s prior couples rotation and translation (on ``sim-voyager`` every
+        filter's trajectory stays at the first pose, T_error ≈ 100 %). Centring is the same model
+        ``p_{k+1} = R p_k + t`` in translated coordinates, so the estimate no longer depends on
+        the target's position. ``center=False`` reproduces the raw-coordinate behaviour.
     divergence_limit : float
         ``status="failed"`` when ``max|x[:9]| > divergence_limit`` or
         ``max|x[9:]| > divergence_limit·(1 + max|a|, |b|)`` (diverged filter; relevant for the
@@ -570,7 +574,7 @@ class RecursiveEstimator:
         collinear_tol: float = 1e-3,
         coplanar_tol: float = 1e-3,
         covariance: CovarianceMode | None = None,
-        center: bool = False,
+        center: bool | None = None,
         divergence_limit: float = 1e3,
     ) -> None:
         if adaptive is None:
@@ -598,7 +602,7 @@ class RecursiveEstimator:
         self.collinear_tol = _check_positive("collinear_tol", collinear_tol, allow_zero=True)
         self.coplanar_tol = _check_positive("coplanar_tol", coplanar_tol, allow_zero=True)
         self.covariance_mode: CovarianceMode = cov
-        self.center = bool(center)
+        self.center = (not self.paper_literal) if center is None else bool(center)
         self.divergence_limit = _check_positive("divergence_limit", divergence_limit)
         self._prev_state: np.ndarray | None = None
 

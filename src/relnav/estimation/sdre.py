@@ -17,8 +17,9 @@ normalised-LMS update, per correspondence ``u`` in ascending descriptor distance
 "State-dependent" enters through ``b = M_u`` (the adaptive factor of that match).
 
 With Paper 1's ``σ_w = 5e-3`` the gain is tiny (``g ≈ σ_w²/(1 + …)`` ≈ 2.5e-5 for ``M ≈ 1``), so
-the estimate barely leaves the identity; ``sigma_w_sdre`` is therefore a separate option (default
-5e-3 for fidelity; ``0.5`` gives a usable gain ≈ 0.19 for ``M = 1``).
+the estimate never leaves the identity; ``sigma_w_sdre`` is therefore a separate option
+**[interpretation]**: default ``0.5`` (a usable gain ≈ 0.19 for ``M = 1``) for the coherent
+filter, Paper 1's ``5e-3`` with ``paper_literal=True`` or when set explicitly.
 
 ``paper_literal=True`` solves the DARE **as printed** (without ``+Q``): its non-negative
 solution is ``ξ = max(0, r(a² − 1)/b²)`` = 0 for ``σ_w < 1``, so the gain is 0 and the state stays
@@ -91,8 +92,8 @@ class SDREEstimator(RecursiveEstimator):
 
     Parameters
     ----------
-    sigma_w_sdre : float
-        ``A = Q = σ_w I`` of the DARE (Paper 1: σ_w = 5e-3; 0.5 gives a usable gain).
+    sigma_w_sdre : float, optional
+        ``A = Q = σ_w I`` of the DARE. Default 0.5 (coherent) or Paper 1's 5e-3 (literal).
     sigma_v : float
         ``R = σ_v² I`` (default 1).
     **kwargs
@@ -102,8 +103,12 @@ class SDREEstimator(RecursiveEstimator):
 
     name = "sdre"
 
-    def __init__(self, *, sigma_w_sdre: float = 5e-3, sigma_v: float = 1.0, **kwargs: Any) -> None:
+    def __init__(
+        self, *, sigma_w_sdre: float | None = None, sigma_v: float = 1.0, **kwargs: Any
+    ) -> None:
         super().__init__(**kwargs)
+        if sigma_w_sdre is None:
+            sigma_w_sdre = 5e-3 if self.paper_literal else 0.5
         self.sigma_w_sdre = _check_positive("sigma_w_sdre", sigma_w_sdre)
         self.sigma_v = _check_positive("sigma_v", sigma_v)
 
