@@ -27,8 +27,8 @@ def _support_csr(
     """Radius neighbourhoods of the keypoints as CSR arrays ``(flat, offsets)``.
 
     ``flat[offsets[k]:offsets[k + 1]]`` are the indices of the points with
-    ``‖q − p_k‖ ≤ radius`` (keypoint included), in a deterministic order. Without ``tree`` a
-    numba uniform grid (cell = ``radius``) is used; with ``tree`` (or when the grid would need
+    ``‖q − p_k‖ ≤ radius`` (keypoint included), in a deterministic order. Without ``tree`` the
+    numba grid search :func:`radius_search` is used; with ``tree`` (or when the grid would need
     more than 2⁶² cells) the kd-tree's ``sparse_distance_matrix``.
     """
     P = np.ascontiguousarray(points, dtype=np.float64)
@@ -39,7 +39,8 @@ def _support_csr(
     if tree is None:
         dims = np.floor((P.max(axis=0) - P.min(axis=0)) / radius) + 1.0
         if float(np.prod(dims)) < 2.0**62:
-            return _grid_csr(P, kp, float(radius))
+            offsets, flat, _ = radius_search(P, P[kp], float(radius))
+            return flat, offsets
         tree = build_tree(P)
     kp_tree = tree if (K == P.shape[0] and np.array_equal(kp, np.arange(K))) else build_tree(P[kp])
     pairs = kp_tree.sparse_distance_matrix(tree, radius, output_type="ndarray")
@@ -59,66 +60,6 @@ def _group_csr(owner: np.ndarray, idx: np.ndarray, K: int) -> tuple[np.ndarray, 
     for t in range(owner.shape[0]):
         flat[fill[owner[t]]] = idx[t]
         fill[owner[t]] += 1
-    return flat, offsets
-
-
-@njit(cache=True)
-def _grid_csr(P: np.ndarray, kp: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray]:
-    """Radius search on a uniform grid of cell ``r``: CSR ``(flat, offsets)`` (see caller)."""
-    N = P.shape[0]
-    K = kp.shape[0]
-    lo = np.empty(3)
-    dims = np.empty(3, dtype=np.int64)
-    for a in range(3):
-        lo[a] = P[:, a].min()
-        dims[a] = int(np.floor((P[:, a].max() - lo[a]) / r)) + 1
-    cell = np.empty((N, 3), dtype=np.int64)
-    key = np.empty(N, dtype=np.int64)
-    for i in range(N):
-        for a in range(3):
-            c = int(np.floor((P[i, a] - lo[a]) / r))
-            cell[i, a] = min(max(c, 0), dims[a] - 1)
-        key[i] = (cell[i, 0] * dims[1] + cell[i, 1]) * dims[2] + cell[i, 2]
-    order = np.argsort(key, kind="mergesort")
-    skey = key[order]
-    r2 = r * r
-    counts = np.zeros(K, dtype=np.int64)
-    offsets = np.zeros(K + 1, dtype=np.int64)
-    flat = np.empty(0, dtype=np.int64)
-    for sweep in range(2):
-        if sweep == 1:
-            for k in range(K):
-                offsets[k + 1] = offsets[k] + counts[k]
-            flat = np.empty(offsets[K], dtype=np.int64)
-        for k in range(K):
-            qi = kp[k]
-            pos = offsets[k]
-            n = 0
-            for dx in range(-1, 2):
-                cx = cell[qi, 0] + dx
-                if cx < 0 or cx >= dims[0]:
-                    continue
-                for dy in range(-1, 2):
-                    cy = cell[qi, 1] + dy
-                    if cy < 0 or cy >= dims[1]:
-                        continue
-                    for dz in range(-1, 2):
-                        cz = cell[qi, 2] + dz
-                        if cz < 0 or cz >= dims[2]:
-                            continue
-                        kk = (cx * dims[1] + cy) * dims[2] + cz
-                        s0 = np.searchsorted(skey, kk, side="left")
-                        s1 = np.searchsorted(skey, kk, side="right")
-                        for t in range(s0, s1):
-                            j = order[t]
-                            e0 = P[j, 0] - P[qi, 0]
-                            e1 = P[j, 1] - P[qi, 1]
-                            e2 = P[j, 2] - P[qi, 2]
-                            if e0 * e0 + e1 * e1 + e2 * e2 <= r2:
-                                if sweep == 1:
-                                    flat[pos + n] = j
-                                n += 1
-            counts[k] = n
     return flat, offsets
 
 
