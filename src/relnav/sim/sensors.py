@@ -305,11 +305,15 @@ class _RaySensor(Sensor):
     _depth_gate: ClassVar[bool] = False
     """Gate ``[min_range, max_range_m]`` on the depth along +x instead of the slant range."""
 
-    @abc.abstractmethod
     def _measure(
         self, ranges: np.ndarray, dirs_s: np.ndarray, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Noisy points (M, 3) in the sensor frame and a keep mask (M,) for valid returns."""
+        """Noisy points (M, 3) in the sensor frame and a keep mask (M,) for valid returns.
+
+        Default (LIDARs): Gaussian range noise ``range_sigma`` along each ray, every return kept.
+        """
+        r = add_range_noise(ranges, self.range_sigma, rng)
+        return dirs_s * r[:, None], np.ones(r.size, dtype=bool)
 
     def _candidate_rays(self, target: Target, T: np.ndarray) -> np.ndarray | None:
         """Indices of the rays that may hit the target's bounding sphere (None: none)."""
@@ -494,12 +498,6 @@ class ScanningLidar(_RaySensor):
             self._dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], 1)
         return self._dirs
 
-    def _measure(
-        self, ranges: np.ndarray, dirs_s: np.ndarray, rng: np.random.Generator
-    ) -> tuple[np.ndarray, np.ndarray]:
-        r = add_range_noise(ranges, self.range_sigma, rng)
-        return dirs_s * r[:, None], np.ones(r.size, dtype=bool)
-
 
 class FlashLidar(_RaySensor):
     """Flash (focal-plane-array) LIDAR: one range per pixel, pixel grid centred on +x.
@@ -582,12 +580,6 @@ class FlashLidar(_RaySensor):
             f = _pinhole_dirs if self.projection == "pinhole" else _equiangular_dirs
             self._dirs = f(self.cols, self.rows, self.fov_h_deg, self.fov_v_deg)
         return self._dirs
-
-    def _measure(
-        self, ranges: np.ndarray, dirs_s: np.ndarray, rng: np.random.Generator
-    ) -> tuple[np.ndarray, np.ndarray]:
-        r = add_range_noise(ranges, self.range_sigma, rng)
-        return dirs_s * r[:, None], np.ones(r.size, dtype=bool)
 
 
 class DepthCamera(_RaySensor):
