@@ -117,6 +117,19 @@ def _apply(X: np.ndarray, R: np.ndarray, t: np.ndarray) -> None:
 
 
 @njit(cache=True)
+def _max_step(X: np.ndarray, Xo: np.ndarray) -> float:
+    """Largest point displacement ``max_i ‖X_i − Xo_i‖`` (m); then ``Xo ← X``."""
+    dual = 0.0
+    for i in range(X.shape[0]):
+        d = 0.0
+        for a in range(3):
+            d += (X[i, a] - Xo[i, a]) ** 2
+        dual = max(dual, math.sqrt(d))
+    Xo[:, :] = X
+    return dual
+
+
+@njit(cache=True)
 def _kabsch(X: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares ``(R, t)`` with ``U ≈ R X + t`` (Horn's quaternion method)."""
     n = X.shape[0]
@@ -244,13 +257,7 @@ def _admm_point(
             _apply(X, R, t)
             fits += 1
             Tacc = _compose_left(R, t, Tacc)
-            dual = 0.0
-            for i in range(n):
-                d = 0.0
-                for a in range(3):
-                    d += (X[i, a] - Xo[i, a]) ** 2
-                dual = max(dual, math.sqrt(d))
-            Xo[:, :] = X
+            dual = _max_step(X, Xo)
             if dual < stop:
                 break
         primal = 0.0
@@ -312,13 +319,7 @@ def _admm_plane(
             _apply(X, R, t)
             fits += 1
             Tacc = _compose_left(R, t, Tacc)
-            dual = 0.0
-            for i in range(n):
-                d = 0.0
-                for a in range(3):
-                    d += (X[i, a] - Xo[i, a]) ** 2
-                dual = max(dual, math.sqrt(d))
-            Xo[:, :] = X
+            dual = _max_step(X, Xo)
             if dual < stop:
                 break
         primal = 0.0
