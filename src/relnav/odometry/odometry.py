@@ -21,6 +21,7 @@ import numpy as np
 
 from relnav.errors import RelnavError
 from relnav.geometry.rotations import rotation_angle
+from relnav.geometry.se3 import invert
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.types import Scan
@@ -173,7 +174,7 @@ class Odometry:
         """Reject (in place) a step too far from the motion prior."""
         if self.gate_rotation is None and self.gate_translation is None:
             return
-        d = np.linalg.inv(self.prior_step) @ result.T_target_source
+        d = invert(self.prior_step) @ result.T_target_source
         d_rot = rotation_angle(d[:3, :3])
         d_t = float(np.linalg.norm(result.T_target_source[:3, 3] - self.prior_step[:3, 3]))
         if (self.gate_rotation is not None and d_rot > self.gate_rotation) or (
