@@ -16,7 +16,7 @@ from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
 from relnav.registration.base import Registration
 from relnav.types import Scan
 
-__all__ = ["DIAGNOSTIC_STAGES", "OdometryRun", "run_sequence"]
+__all__ = ["DIAGNOSTIC_STAGES", "NAVIGATOR_METHOD", "OdometryRun", "make_tracker", "run_sequence"]
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +109,28 @@ class OdometryRun:
         return {"estimate": est, "diagnostics": diag}
 
 
+NAVIGATOR_METHOD = "relnav"
+"""The method string of relnav's own frame-to-model navigator (:mod:`relnav.navigation`)."""
+
+
+def make_tracker(
+    method: str | Registration,
+    *,
+    initial_pose: np.ndarray | None = None,
+    motion_prior: MotionPrior = "constant_velocity",
+    **method_options: Any,
+) -> Any:
+    """The per-frame tracker for ``method``: relnav's navigator or pairwise :class:`Odometry`.
+
+    Both have ``register_frame(scan) -> OdometryStep``.
+    """
+    if isinstance(method, str) and method.strip().lower() == NAVIGATOR_METHOD:
+        from relnav.navigation import Navigator
+
+        return Navigator(initial_pose=initial_pose, **method_options)
+    return Odometry(method, initial_pose=initial_pose, motion_prior=motion_prior, **method_options)
+
+
 def run_sequence(
     sequence: Sequence[Scan],
     method: str | Registration = "feature:hods+gcc+alphabeta",
@@ -154,7 +176,7 @@ def run_sequence(
     else:
         T0 = None if initial_pose is None else np.asarray(initial_pose, dtype=float)
         init_source = "given" if T0 is not None else "identity"
-    odo = Odometry(method, initial_pose=T0, motion_prior=motion_prior, **method_options)
+    odo = make_tracker(method, initial_pose=T0, motion_prior=motion_prior, **method_options)
     steps: list[OdometryStep] = []
     times = np.zeros(n)
     with limit_blas_threads(blas_threads):

@@ -1,0 +1,279 @@
+"""Robust scan-to-map registration with a motion prior (the navigator's inner solver).
+
+One Gauss–Newton problem per frame, solved in a single numba function:
+
+.. math::
+
+    \\min_T \\sum_i \\rho\\big(e_i^T \\Omega_{j(i)} e_i\\big)
+    + \\xi(T)^T \\Lambda\\, \\xi(T), \\qquad e_i = T p_i - \\mu_{j(i)},
+
+where ``p_i`` are the scan points (sensor frame), ``μ_j`` / ``Ω_j`` the mean and information of
+the nearest voxel of the map (target frame; :class:`relnav.navigation.voxel_map.VoxelMap`),
+``ρ`` the Geman–McClure kernel with scale ``c`` (in units of the Mahalanobis distance), and
+``ξ(T) = log(T T_pred⁻¹)`` the left twist from the motion model's prediction with information
+``Λ``. Directions the scan does not constrain (a symmetric target seen along its axis, a flat
+panel) are taken from the prior instead of drifting: the prior is part of the least squares, not
+a gate applied afterwards.
+
+Perturbations are on the left, ``T ← exp(δ) T`` with ``δ = [ρ (m), φ (rad)]`` in the target
+frame, so ``∂e/∂δ = [I, −[Tp]×]``. The solver returns the registration's own information
+``H = Σ w JᵀΩJ`` (without the prior) for covariance and degeneracy checks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.spatial import cKDTree
+
+__all__ = ["ScanToMapFit", "solve_scan_to_map"]
+
+
+@njit(cache=True)
+def _rodrigues(w0: float, w1: float, w2: float) -> np.ndarray:  # pragma: no cover - numba
+    th = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    R = np.eye(3)
+    if th < 1e-12:
+        R[0, 1], R[0, 2], R[1, 2] = -w2, w1, -w0
+        R[1, 0], R[2, 0], R[2, 1] = w2, -w1, w0
+        return R
+    k0, k1, k2 = w0 / th, w1 / th, w2 / th
+    s, c1 = math.sin(th), 1.0 - math.cos(th)
+    K = np.zeros((3, 3))
+    K[0, 1], K[0, 2], K[1, 2] = -k2, k1, -k0
+    K[1, 0], K[2, 0], K[2, 1] = k2, -k1, k0
+    for a in range(3):
+        for b in range(3):
+            kk = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
+            R[a, b] += s * K[a, b] + c1 * kk
+    return R
+
+
+@njit(cache=True)
+def _rot_log(R: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) * 0.5
+    c = min(1.0, max(-1.0, c))
+    th = math.acos(c)
+    w = np.empty(3)
+    w[0] = R[2, 1] - R[1, 2]
+    w[1] = R[0, 2] - R[2, 0]
+    w[2] = R[1, 0] - R[0, 1]
+    s = math.sin(th)
+    f = 0.5 if th < 1e-9 else 0.5 * th / s if s > 1e-9 else 0.0
+    if s <= 1e-9 and th > 1e-9:  # near pi: from the diagonal
+        for a in range(3):
+            w[a] = th * math.sqrt(max(0.0, (R[a, a] + 1.0) * 0.5))
+        return w
+    for a in range(3):
+        w[a] *= f
+    return w
+
+
+@njit(cache=True)
+def _prior_twist(T: np.ndarray, Tp: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """First-order left twist ``log(T Tp⁻¹)`` = ``[t − R_d t_p, log R_d]``."""
+    Rd = T[:3, :3] @ Tp[:3, :3].T
+    xi = np.empty(6)
+    for a in range(3):
+        xi[a] = T[a, 3] - (Rd[a, 0] * Tp[0, 3] + Rd[a, 1] * Tp[1, 3] + Rd[a, 2] * Tp[2, 3])
+    w = _rot_log(Rd)
+    xi[3], xi[4], xi[5] = w[0], w[1], w[2]
+    return xi
+
+
+@njit(cache=True)
+def _solve6(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Solve the SPD system ``A x = b`` (6×6) by Cholesky with a tiny ridge."""
+    n = 6
+    L = np.zeros((n, n))
+    ridge = 1e-12 * (abs(A[0, 0]) + abs(A[3, 3]) + 1.0)
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j] + (ridge if i == j else 0.0)
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                L[i, i] = math.sqrt(s) if s > 0.0 else 1e-300
+            else:
+                L[i, j] = s / L[j, j]
+    y = np.zeros(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x
+
+
+@njit(cache=True)
+def _accumulate(
+    X: np.ndarray,
+    idx: np.ndarray,
+    M: np.ndarray,
+    Om: np.ndarray,
+    c2: float,
+) -> tuple[np.ndarray, np.ndarray, int, float, float, np.ndarray]:  # pragma: no cover - numba
+    """Weighted normal equations at the current correspondences.
+
+    Returns ``(H, g, n_pairs, Σw, Σw·d², d2)`` with ``d2`` the squared Mahalanobis distance of
+    each point (``-1`` for points without a neighbour).
+    """
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
+    n_pairs = 0
+    sw = 0.0
+    swd = 0.0
+    d2_out = np.full(X.shape[0], -1.0)
+    J = np.zeros((3, 6))
+    OJ = np.zeros((3, 6))
+    for i in range(X.shape[0]):
+        j = idx[i]
+        if j < 0:
+            continue
+        e0 = X[i, 0] - M[j, 0]
+        e1 = X[i, 1] - M[j, 1]
+        e2 = X[i, 2] - M[j, 2]
+        O = Om[j]
+        Oe0 = O[0, 0] * e0 + O[0, 1] * e1 + O[0, 2] * e2
+        Oe1 = O[1, 0] * e0 + O[1, 1] * e1 + O[1, 2] * e2
+        Oe2 = O[2, 0] * e0 + O[2, 1] * e1 + O[2, 2] * e2
+        d2 = e0 * Oe0 + e1 * Oe1 + e2 * Oe2
+        d2_out[i] = d2
+        q = c2 / (c2 + d2)
+        w = q * q
+        n_pairs += 1
+        sw += w
+        swd += w * d2
+        x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
+        # J = [I, -[x]x]
+        for a in range(3):
+            for b in range(6):
+                J[a, b] = 0.0
+        J[0, 0] = J[1, 1] = J[2, 2] = 1.0
+        J[0, 4], J[0, 5] = x2, -x1
+        J[1, 3], J[1, 5] = -x2, x0
+        J[2, 3], J[2, 4] = x1, -x0
+        for a in range(3):
+            for b in range(6):
+                OJ[a, b] = O[a, 0] * J[0, b] + O[a, 1] * J[1, b] + O[a, 2] * J[2, b]
+        for p in range(6):
+            g[p] += w * (J[0, p] * Oe0 + J[1, p] * Oe1 + J[2, p] * Oe2)
+            for r in range(p, 6):
+                H[p, r] += w * (J[0, p] * OJ[0, r] + J[1, p] * OJ[1, r] + J[2, p] * OJ[2, r])
+    for p in range(6):
+        for r in range(p):
+            H[p, r] = H[r, p]
+    return H, g, n_pairs, sw, swd, d2_out
+
+
+def solve_scan_to_map(
+    P: np.ndarray,
+    tree: cKDTree,
+    M: np.ndarray,
+    Om: np.ndarray,
+    T0: np.ndarray,
+    T_pred: np.ndarray,
+    Lam: np.ndarray,
+    gate: float,
+    c: float,
+    max_iter: int,
+    tol_t: float,
+    tol_r: float,
+    c0: float = 100.0,
+    decay: float = 0.6,
+) -> ScanToMapFit:
+    """Register the scan ``P`` (sensor frame, ``(N, 3)``) onto the map from ``T0``.
+
+    Parameters
+    ----------
+    P : (N, 3) float64
+        Scan points, sensor frame, m.
+    tree : scipy.spatial.cKDTree
+        KD-tree over the map points ``M`` (target frame).
+    M, Om : (K, 3), (K, 3, 3) float64
+        Map points (m) and their information matrices (1/m²).
+    T0, T_pred : (4, 4) float64
+        Initial guess and motion-model prediction of ``T_target_sensor``.
+    Lam : (6, 6) float64
+        Information of the prediction, left twist ``[ρ, φ]`` in the target frame.
+    gate : float
+        Largest point-to-map distance of a pair, m.
+    c : float
+        Geman–McClure scale on the Mahalanobis distance.
+    c0, decay : float
+        Graduated non-convexity: the kernel scale starts at ``c0`` and shrinks by ``decay`` per
+        iteration down to ``c``, so that a prediction far from the truth still converges (a
+        tight kernel from the start locks onto the nearest wrong pairs).
+    max_iter : int
+        Gauss–Newton iterations at most.
+    tol_t, tol_r : float
+        Stop when the update is below these (m, rad).
+    """
+    T = np.array(T0, dtype=np.float64)
+    c2 = float(c) * float(c)
+    scale = max(float(c0), float(c))
+    iters = 0
+    Pc = np.ascontiguousarray(P, dtype=np.float64)
+    for it in range(max_iter):
+        iters = it + 1
+        X = Pc @ T[:3, :3].T + T[:3, 3]
+        _, idx = tree.query(X, distance_upper_bound=gate)
+        idx = np.where(idx >= len(M), -1, idx).astype(np.int64)
+        H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale)
+        xi = _prior_twist(T, np.ascontiguousarray(T_pred))
+        delta = _solve6(H + Lam, -(g + Lam @ xi))
+        R = _rodrigues(delta[3], delta[4], delta[5])
+        Tn = np.eye(4)
+        Tn[:3, :3] = R @ T[:3, :3]
+        Tn[:3, 3] = R @ T[:3, 3] + delta[:3]
+        T = Tn
+        annealed = scale <= c
+        scale = max(float(c), scale * decay)
+        if annealed and np.linalg.norm(delta[:3]) < tol_t and np.linalg.norm(delta[3:]) < tol_r:
+            break
+    X = Pc @ T[:3, :3].T + T[:3, 3]
+    _, idx = tree.query(X, distance_upper_bound=gate)
+    idx = np.where(idx >= len(M), -1, idx).astype(np.int64)
+    H, _, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c2)
+    return ScanToMapFit(T, H, int(n_pairs), iters, float(sw), float(swd), d2, idx)
+
+
+@dataclass
+class ScanToMapFit:
+    """Outcome of :func:`solve_scan_to_map`.
+
+    Attributes
+    ----------
+    T : (4, 4) float64
+        ``T_target_sensor``.
+    H : (6, 6) float64
+        The scan's own information (no prior) at the final pairs, left twist ``[ρ, φ]``.
+    n_pairs : int
+        Scan points with a map point within the gate.
+    iterations : int
+        Gauss–Newton iterations run.
+    sw, swd : float
+        Sum of robust weights and of weighted squared Mahalanobis distances.
+    d2 : (N,) float64
+        Squared Mahalanobis distance of each point (-1: no map point within the gate).
+    idx : (N,) int64
+        Map index paired with each point (-1: none).
+    """
+
+    T: np.ndarray
+    H: np.ndarray
+    n_pairs: int
+    iterations: int
+    sw: float
+    swd: float
+    d2: np.ndarray
+    idx: np.ndarray

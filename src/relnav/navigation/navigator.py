@@ -1,0 +1,381 @@
+"""relnav's own navigator (method ``relnav``): frame-to-model tracking of a space target.
+
+Each scan is registered to a model of the target accumulated in the target frame from the
+previous scans (:class:`~relnav.navigation.voxel_map.VoxelMap`), by robust generalised ICP
+against the voxels' Gaussians with the motion model's prediction inside the least squares
+(:func:`~relnav.navigation.gicp.solve_scan_to_map`). A static target and a tumbling one are the
+same problem in the target frame: the estimated pose is ``T_target_sensor``.
+
+Per frame ``k``:
+
+1. **Predict** with a constant-velocity SE(3) model: ``T̂_k = T_{k-1} exp(Δt_k/Δt_{k-1} ·
+   log(Δ_{k-1}))``, ``Δ_{k-1} = T_{k-2}⁻¹ T_{k-1}`` (body-frame increment). Its uncertainty is
+   adaptive (as KISS-ICP's threshold): the RMS of the model's recent corrections, in the body
+   frame, floored.
+2. **Register** the scan onto the map from ``T̂_k`` with the prediction as a prior
+   (information ``Λ`` from that uncertainty). Directions the scan cannot fix (a symmetric
+   target about its axis, one flat panel) stay at the prediction instead of drifting.
+3. **Judge** the step from evidence only: too few points or map pairs, too small an overlap
+   (fraction of the scan within the gate), a robust residual far above the map's noise, or a
+   correction inconsistent with the motion model (Mahalanobis χ² beyond ``chi2_gate``) →
+   ``failed``: the pose keeps the prediction and the map is not updated. The scan's own
+   information ``H`` (no prior) gives the degeneracy (smallest eigenvalue of the
+   lever-arm-normalised ``H`` relative to the largest) reported per frame.
+4. **Update** the map with the accepted scan.
+
+Parameters are scale-free (multiples of the first scan's point spacing ``s₀``) and were chosen
+on the navigation suite (``benchmarks/nav_suite.py``), then frozen.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from relnav.geometry.se3 import exp_se3, invert, log_se3
+from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.voxel_map import VoxelMap
+from relnav.odometry.odometry import OdometryStep
+from relnav.registration.result import RegistrationResult
+from relnav.types import Scan
+
+__all__ = ["Navigator", "NavigatorConfig"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class NavigatorConfig:
+    """Options of :class:`Navigator` (``-O key=value`` on the command line).
+
+    Attributes
+    ----------
+    voxel_factor : float
+        Map voxel edge in multiples of the first scan's median point spacing ``s₀``.
+    max_voxel_weight : float
+        Observations after which a voxel forgets geometrically (map adapts to corrections).
+    max_voxels : int
+        Bound on the map size (least recently seen voxels dropped).
+    kernel : float
+        Geman–McClure scale on the Mahalanobis distance to a voxel (σ units).
+    max_iter : int
+        Gauss–Newton iterations per frame.
+    min_points : int
+        Scans with fewer finite points are ``failed``.
+    min_overlap : float
+        Smallest fraction of scan points with a map voxel within the gate for an ``ok`` step.
+    chi2_gate : float
+        Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
+        ``ok`` step.
+    sigma_floor_t, sigma_floor_r_deg : float
+        Floors of the motion model's 1σ per-frame uncertainty: translation in multiples of
+        ``s₀``, rotation in degrees.
+    sigma_first_t, sigma_first_r_deg : float
+        Uncertainty of the first prediction (no velocity yet): translation in multiples of the
+        scan's RMS radius, rotation in degrees.
+    adapt_window : int
+        Frames over which the motion model's correction RMS is averaged.
+    noise_floor : float
+        Smallest 1σ of a map patch along its normal, multiples of ``s₀``.
+    inplane_sigma : float
+        1σ of a map patch along its own plane, multiples of ``s₀`` (weak: point-to-plane).
+    k_neighbors : int
+        Map points per patch (normal estimation).
+    """
+
+    voxel_factor: float = 0.3
+    inplane_sigma: float = 1.0
+    k_neighbors: int = 10
+    max_voxel_weight: float = 20.0
+    max_voxels: int = 200_000
+    kernel: float = 3.0
+    max_iter: int = 30
+    min_points: int = 6
+    min_overlap: float = 0.3
+    chi2_gate: float = 50.0
+    sigma_floor_t: float = 0.05
+    sigma_floor_r_deg: float = 0.1
+    sigma_first_t: float = 0.5
+    sigma_first_r_deg: float = 10.0
+    adapt_window: int = 10
+    noise_floor: float = 0.03
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _adjoint(T: np.ndarray) -> np.ndarray:
+    """SE(3) adjoint for twists ``[ρ, φ]``: ``[[R, [t]×R], [0, R]]``."""
+    R, t = T[:3, :3], T[:3, 3]
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[:3, 3:] = tx @ R
+    A[3:, 3:] = R
+    return A
+
+
+def _spacing(P: np.ndarray) -> float:
+    """Median nearest-neighbour distance of a cloud (m)."""
+    d, _ = cKDTree(P).query(P, k=2)
+    s = float(np.median(d[:, 1]))
+    return s if s > 0 else float(np.mean(d[:, 1]))
+
+
+class Navigator:
+    """Frame-to-model navigator with the :class:`~relnav.odometry.Odometry` interface.
+
+    Parameters
+    ----------
+    initial_pose : (4, 4) float64, optional
+        ``T_target_sensor`` of the first frame (identity by default).
+    **options
+        Fields of :class:`NavigatorConfig`.
+    """
+
+    name = "relnav"
+
+    def __init__(self, *, initial_pose: np.ndarray | None = None, **options: Any) -> None:
+        known = set(NavigatorConfig.__dataclass_fields__) - {"extra"}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            from relnav.errors import ConfigError
+
+            raise ConfigError(
+                f"unknown option(s) for method 'relnav': {', '.join(unknown)}; "
+                f"accepted: {', '.join(sorted(known))}"
+            )
+        self.config = NavigatorConfig(**options)
+        self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
+        self.velocity = np.zeros(6)  # body-frame twist per second [ρ, φ]
+        self.map: VoxelMap | None = None
+        self.spacing0 = float("nan")
+        self.n_frames = 0
+        self._t_prev: float | None = None
+        self._have_velocity = False
+        self._corr: list[np.ndarray] = []  # recent body-frame corrections (6,)
+        self._n_failed_run = 0
+
+    # ------------------------------------------------------------------ helpers
+    def _motion_sigma(self) -> tuple[np.ndarray, float]:
+        """Body-frame 1σ of the prediction ``[σ_t (3), σ_r (3)]`` and the lever arm (m)."""
+        c = self.config
+        s0 = self.spacing0
+        if not self._have_velocity:
+            return np.array([math.nan] * 6), 0.0
+        if self._corr:
+            C = np.asarray(self._corr[-c.adapt_window :])
+            rms_t = float(np.sqrt(np.mean(np.sum(C[:, :3] ** 2, axis=1)) / 3.0))
+            rms_r = float(np.sqrt(np.mean(np.sum(C[:, 3:] ** 2, axis=1)) / 3.0))
+        else:
+            rms_t, rms_r = 0.5 * s0, math.radians(1.0)
+        inflate = 1.0 + self._n_failed_run
+        st = max(rms_t, c.sigma_floor_t * s0) * inflate
+        sr = max(rms_r, math.radians(c.sigma_floor_r_deg)) * inflate
+        return np.array([st, st, st, sr, sr, sr]), 0.0
+
+    def _predict(self, t: float) -> np.ndarray:
+        if not self._have_velocity or self._t_prev is None:
+            return self.pose.copy()
+        dt = t - self._t_prev
+        return self.pose @ exp_se3(self.velocity * dt)
+
+    # ------------------------------------------------------------------ main entry
+    def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
+        """Track one scan; returns the pose ``T_target_sensor`` and the step's status."""
+        c = self.config
+        t_start = time.perf_counter()
+        if isinstance(scan, Scan):
+            P, t = scan.points, float(scan.time)
+        else:
+            P, t = np.asarray(scan, dtype=np.float64).reshape(-1, 3), float(self.n_frames)
+        P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
+        n_raw = len(P)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        timings: dict[str, float] = {}
+
+        if self.map is None:  # first usable frame builds the map
+            out = self._first(P, t, n_raw, t_start)
+            self.n_frames += 1
+            return out
+
+        prev_pose = self.pose.copy()
+        T_pred = self._predict(t)
+        result = self._register(P, T_pred, timings)
+        if result.status == "ok":
+            self.pose = result.T_target_source
+            self._n_failed_run = 0
+            ts = time.perf_counter()
+            self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+            timings["map"] = time.perf_counter() - ts
+            self._update_motion(prev_pose, T_pred, t)
+        else:
+            self.pose = T_pred
+            self._n_failed_run += 1
+            if self._t_prev is not None:
+                self._t_prev = t
+        step = invert(prev_pose) @ self.pose
+        self.n_frames += 1
+        return OdometryStep(
+            self.pose.copy(),
+            step,
+            result,
+            result.status != "ok",
+            result.status,
+            n_raw,
+            time.perf_counter() - t_start,
+        )
+
+    def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
+        c = self.config
+        if len(P) < max(c.min_points, 3):
+            # no map yet: keep the initial pose, wait for a usable scan
+            res = RegistrationResult(
+                status="failed", message=f"only {len(P)} finite points: no map started"
+            )
+            return OdometryStep(
+                self.pose.copy(), np.eye(4), res, True, "failed", n_raw,
+                time.perf_counter() - t_start,
+            )
+        self.spacing0 = _spacing(P)
+        v = c.voxel_factor * self.spacing0
+        self.map = VoxelMap(
+            v,
+            max_weight=c.max_voxel_weight,
+            max_voxels=c.max_voxels,
+            noise_floor=c.noise_floor * self.spacing0,
+            inplane_sigma=c.inplane_sigma * self.spacing0,
+            k_neighbors=c.k_neighbors,
+        )
+        self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+        self._t_prev = t
+        return OdometryStep(
+            self.pose.copy(), np.eye(4), None, False, "first", n_raw,
+            time.perf_counter() - t_start,
+        )
+
+    def _update_motion(self, prev_pose: np.ndarray, T_pred: np.ndarray, t: float) -> None:
+        dt = t - self._t_prev if self._t_prev is not None else 1.0
+        dt = dt if dt > 0 else 1.0
+        if self._have_velocity:
+            corr = log_se3(invert(T_pred) @ self.pose)  # body-frame correction of the model
+            self._corr.append(corr)
+            if len(self._corr) > 4 * self.config.adapt_window:
+                del self._corr[: -self.config.adapt_window]
+        self.velocity = log_se3(invert(prev_pose) @ self.pose) / dt
+        self._have_velocity = True
+        self._t_prev = t
+
+    def _register(self, P: np.ndarray, T_pred: np.ndarray, timings: dict) -> RegistrationResult:
+        c = self.config
+        assert self.map is not None
+        info: dict[str, Any] = {"method": self.name}
+        if len(P) < c.min_points:
+            return RegistrationResult(
+                T_target_source=T_pred,
+                status="failed",
+                message=f"only {len(P)} finite points (< {c.min_points})",
+                timings=timings,
+                info=info,
+            )
+        ts = time.perf_counter()
+        sigma, _ = self._motion_sigma()
+        radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+        rng = float(np.median(np.linalg.norm(P, axis=1)))
+        if not np.all(np.isfinite(sigma)):
+            st = c.sigma_first_t * max(radius, self.spacing0)
+            sr = math.radians(c.sigma_first_r_deg)
+            sigma = np.array([st, st, st, sr, sr, sr])
+        Sb = np.diag(sigma**2)
+        Ad = _adjoint(T_pred)
+        S_left = Ad @ Sb @ Ad.T
+        Lam = np.linalg.inv(S_left)
+        Lam = 0.5 * (Lam + Lam.T)
+        v = self.map.voxel_size
+        motion = 3.0 * (sigma[0] + sigma[3] * rng)
+        gate = float(max(motion, 2.0 * v))
+        M = self.map.means
+        Om = self.map.information
+        tree = self.map.tree
+        timings["prepare"] = time.perf_counter() - ts
+        ts = time.perf_counter()
+        fit = solve_scan_to_map(
+            P,
+            tree,
+            M,
+            Om,
+            np.ascontiguousarray(T_pred),
+            np.ascontiguousarray(T_pred),
+            np.ascontiguousarray(Lam),
+            gate,
+            float(c.kernel),
+            int(c.max_iter),
+            1e-4 * v,
+            1e-4 * v / max(rng, 1.0),
+        )
+        timings["register"] = time.perf_counter() - ts
+        T, H, n_pairs, iters, d2 = fit.T, fit.H, fit.n_pairs, fit.iterations, fit.d2
+        sw, swd = fit.sw, fit.swd
+        n = len(P)
+        has = d2 >= 0
+        inl = has & (d2 < 9.0)
+        overlap = float(has.sum()) / n
+        fitness = float(inl.sum()) / n
+        xi = log_se3(T @ invert(T_pred))
+        chi2 = float(xi @ Lam @ xi)
+        # degeneracy: eigenvalues of H with rotations scaled by the lever arm
+        Sc = np.diag([1.0, 1.0, 1.0, radius, radius, radius])
+        Hs = np.linalg.inv(Sc) @ H @ np.linalg.inv(Sc)
+        ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
+        cond = float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
+        robust_rms = float(math.sqrt(swd / sw)) if sw > 0 else float("nan")
+        info.update(
+            iterations=int(iters),
+            overlap=overlap,
+            chi2_motion=chi2,
+            degeneracy=cond,
+            gate=gate,
+            sigma_t=float(sigma[0]),
+            sigma_r_deg=float(math.degrees(sigma[3])),
+            map_voxels=len(self.map),
+            robust_rms_sigma=robust_rms,
+        )
+        status = "ok"
+        message = ""
+        if n_pairs < c.min_points:
+            status, message = "failed", f"{n_pairs} scan points near the model (< {c.min_points})"
+        elif overlap < c.min_overlap:
+            status, message = "failed", f"overlap {overlap:.2f} with the model (< {c.min_overlap})"
+        elif chi2 > c.chi2_gate:
+            status, message = (
+                "failed",
+                f"correction inconsistent with the motion model (χ² {chi2:.1f} > {c.chi2_gate})",
+            )
+        cov = None
+        try:
+            cov = np.linalg.inv(H + Lam)
+        except np.linalg.LinAlgError:
+            cov = None
+        return RegistrationResult(
+            T_target_source=T,
+            covariance=cov,
+            fitness=fitness,
+            inlier_rmse=robust_rms,
+            n_correspondences=int(n_pairs),
+            n_inliers=int(inl.sum()),
+            converged=iters < c.max_iter,
+            status=status,  # type: ignore[arg-type]
+            timings=timings,
+            message=message,
+            info=info,
+        )
+
+    def config_dict(self) -> dict[str, Any]:
+        """The options in use."""
+        d = asdict(self.config)
+        d.pop("extra", None)
+        return d
