@@ -38,8 +38,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.geometry.se3 import exp_se3, invert, log_se3
+from relnav.geometry.se3 import invert, log_se3
 from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.motion import ConstantVelocityFilter, adjoint
 from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult
@@ -73,14 +74,12 @@ class NavigatorConfig:
     chi2_gate : float
         Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
         ``ok`` step.
-    sigma_floor_t, sigma_floor_r_deg : float
-        Floors of the motion model's 1σ per-frame uncertainty: translation in multiples of
-        ``s₀``, rotation in degrees.
+    sigma_acc_t, sigma_acc_r_deg : float
+        Motion model's white acceleration: 1σ change of the per-frame motion from one frame to
+        the next, translation in multiples of ``s₀``, rotation in degrees.
     sigma_first_t, sigma_first_r_deg : float
-        Uncertainty of the first prediction (no velocity yet): translation in multiples of the
-        scan's RMS radius, rotation in degrees.
-    adapt_window : int
-        Frames over which the motion model's correction RMS is averaged.
+        1σ of the unknown motion over the first frame period: translation in multiples of the
+        first scan's RMS radius, rotation in degrees.
     noise_floor : float
         Smallest 1σ of a map patch along its normal, multiples of ``s₀``.
     inplane_sigma : float
@@ -90,7 +89,7 @@ class NavigatorConfig:
     """
 
     voxel_factor: float = 0.3
-    inplane_sigma: float = 1.0
+    inplane_sigma: float = 3.0
     k_neighbors: int = 10
     max_voxel_weight: float = 20.0
     max_voxels: int = 200_000
@@ -98,25 +97,13 @@ class NavigatorConfig:
     max_iter: int = 30
     min_points: int = 6
     min_overlap: float = 0.3
-    chi2_gate: float = 50.0
-    sigma_floor_t: float = 0.05
-    sigma_floor_r_deg: float = 0.1
-    sigma_first_t: float = 0.5
-    sigma_first_r_deg: float = 10.0
-    adapt_window: int = 10
+    chi2_gate: float = 100.0
+    sigma_acc_t: float = 0.2
+    sigma_acc_r_deg: float = 0.2
+    sigma_first_t: float = 5.0
+    sigma_first_r_deg: float = 30.0
     noise_floor: float = 0.03
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-def _adjoint(T: np.ndarray) -> np.ndarray:
-    """SE(3) adjoint for twists ``[ρ, φ]``: ``[[R, [t]×R], [0, R]]``."""
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[:3, 3:] = tx @ R
-    A[3:, 3:] = R
-    return A
 
 
 def _spacing(P: np.ndarray) -> float:
@@ -151,38 +138,10 @@ class Navigator:
             )
         self.config = NavigatorConfig(**options)
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
-        self.velocity = np.zeros(6)  # body-frame twist per second [ρ, φ]
         self.map: VoxelMap | None = None
+        self.motion: ConstantVelocityFilter | None = None
         self.spacing0 = float("nan")
         self.n_frames = 0
-        self._t_prev: float | None = None
-        self._have_velocity = False
-        self._corr: list[np.ndarray] = []  # recent body-frame corrections (6,)
-        self._n_failed_run = 0
-
-    # ------------------------------------------------------------------ helpers
-    def _motion_sigma(self) -> tuple[np.ndarray, float]:
-        """Body-frame 1σ of the prediction ``[σ_t (3), σ_r (3)]`` and the lever arm (m)."""
-        c = self.config
-        s0 = self.spacing0
-        if not self._have_velocity:
-            return np.array([math.nan] * 6), 0.0
-        if self._corr:
-            C = np.asarray(self._corr[-c.adapt_window :])
-            rms_t = float(np.sqrt(np.mean(np.sum(C[:, :3] ** 2, axis=1)) / 3.0))
-            rms_r = float(np.sqrt(np.mean(np.sum(C[:, 3:] ** 2, axis=1)) / 3.0))
-        else:
-            rms_t, rms_r = 0.5 * s0, math.radians(1.0)
-        inflate = 1.0 + self._n_failed_run
-        st = max(rms_t, c.sigma_floor_t * s0) * inflate
-        sr = max(rms_r, math.radians(c.sigma_floor_r_deg)) * inflate
-        return np.array([st, st, st, sr, sr, sr]), 0.0
-
-    def _predict(self, t: float) -> np.ndarray:
-        if not self._have_velocity or self._t_prev is None:
-            return self.pose.copy()
-        dt = t - self._t_prev
-        return self.pose @ exp_se3(self.velocity * dt)
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -203,21 +162,26 @@ class Navigator:
             self.n_frames += 1
             return out
 
+        assert self.motion is not None
         prev_pose = self.pose.copy()
-        T_pred = self._predict(t)
-        result = self._register(P, T_pred, timings)
+        if not self._rescaled:  # per-frame sigmas → per second, with the first frame period
+            dt = t - self.motion.t
+            if np.isfinite(dt) and dt > 0:
+                self.motion.P[6:, 6:] /= dt**2
+                self.motion.sigma_acc = self.motion.sigma_acc / dt
+            self._rescaled = True
+        T_pred, P_pp = self.motion.predict(t)
+        result = self._register(P, T_pred, P_pp, timings)
         if result.status == "ok":
-            self.pose = result.T_target_source
-            self._n_failed_run = 0
+            self.motion.update(result.T_target_source, result.info.pop("_H"))
+            self.pose = self.motion.pose.copy()
             ts = time.perf_counter()
             self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             timings["map"] = time.perf_counter() - ts
-            self._update_motion(prev_pose, T_pred, t)
         else:
-            self.pose = T_pred
-            self._n_failed_run += 1
-            if self._t_prev is not None:
-                self._t_prev = t
+            result.info.pop("_H", None)
+            self.motion.skip()
+            self.pose = self.motion.pose.copy()
         step = invert(prev_pose) @ self.pose
         self.n_frames += 1
         return OdometryStep(
@@ -252,25 +216,28 @@ class Navigator:
             k_neighbors=c.k_neighbors,
         )
         self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-        self._t_prev = t
+        radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+        st0 = c.sigma_first_t * max(radius, self.spacing0)
+        sr0 = math.radians(c.sigma_first_r_deg)
+        sa_t = c.sigma_acc_t * self.spacing0
+        sa_r = math.radians(c.sigma_acc_r_deg)
+        # velocities per second need a frame period: the first one is not known yet, so the
+        # filter is set up per frame period (1 s) and rescaled at the second frame.
+        self.motion = ConstantVelocityFilter(
+            self.pose,
+            t,
+            np.array([st0] * 3 + [sr0] * 3),
+            np.array([sa_t] * 3 + [sa_r] * 3),
+        )
+        self._rescaled = False
         return OdometryStep(
             self.pose.copy(), np.eye(4), None, False, "first", n_raw,
             time.perf_counter() - t_start,
         )
 
-    def _update_motion(self, prev_pose: np.ndarray, T_pred: np.ndarray, t: float) -> None:
-        dt = t - self._t_prev if self._t_prev is not None else 1.0
-        dt = dt if dt > 0 else 1.0
-        if self._have_velocity:
-            corr = log_se3(invert(T_pred) @ self.pose)  # body-frame correction of the model
-            self._corr.append(corr)
-            if len(self._corr) > 4 * self.config.adapt_window:
-                del self._corr[: -self.config.adapt_window]
-        self.velocity = log_se3(invert(prev_pose) @ self.pose) / dt
-        self._have_velocity = True
-        self._t_prev = t
-
-    def _register(self, P: np.ndarray, T_pred: np.ndarray, timings: dict) -> RegistrationResult:
+    def _register(
+        self, P: np.ndarray, T_pred: np.ndarray, P_pp: np.ndarray, timings: dict
+    ) -> RegistrationResult:
         c = self.config
         assert self.map is not None
         info: dict[str, Any] = {"method": self.name}
@@ -283,20 +250,15 @@ class Navigator:
                 info=info,
             )
         ts = time.perf_counter()
-        sigma, _ = self._motion_sigma()
         radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
         rng = float(np.median(np.linalg.norm(P, axis=1)))
-        if not np.all(np.isfinite(sigma)):
-            st = c.sigma_first_t * max(radius, self.spacing0)
-            sr = math.radians(c.sigma_first_r_deg)
-            sigma = np.array([st, st, st, sr, sr, sr])
-        Sb = np.diag(sigma**2)
-        Ad = _adjoint(T_pred)
-        S_left = Ad @ Sb @ Ad.T
-        Lam = np.linalg.inv(S_left)
+        sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
+        Ad = adjoint(T_pred)
+        S_left = Ad @ P_pp @ Ad.T
+        Lam = np.linalg.pinv(0.5 * (S_left + S_left.T))
         Lam = 0.5 * (Lam + Lam.T)
         v = self.map.voxel_size
-        motion = 3.0 * (sigma[0] + sigma[3] * rng)
+        motion = 3.0 * (float(np.linalg.norm(sigma[:3])) + float(np.linalg.norm(sigma[3:])) * rng)
         gate = float(max(motion, 2.0 * v))
         M = self.map.means
         Om = self.map.information
@@ -327,6 +289,7 @@ class Navigator:
         fitness = float(inl.sum()) / n
         xi = log_se3(T @ invert(T_pred))
         chi2 = float(xi @ Lam @ xi)
+        info["_H"] = H
         # degeneracy: eigenvalues of H with rotations scaled by the lever arm
         Sc = np.diag([1.0, 1.0, 1.0, radius, radius, radius])
         Hs = np.linalg.inv(Sc) @ H @ np.linalg.inv(Sc)

@@ -1,0 +1,106 @@
+"""Constant-velocity SE(3) filter: the navigator's motion model and velocity estimate.
+
+State: the pose ``T`` (``T_target_sensor``) and the body-frame twist rate ``v = [ν (m/s),
+ω (rad/s)]``; error state ``[δp, δv]`` (12) with ``T_true = T exp(δp)`` (right, body-frame
+perturbation) and covariance ``P`` (12×12).
+
+* **Predict** over ``Δt``: ``T ← T exp(v Δt)``, ``P ← F P Fᵀ + Q`` with
+  ``F = [[Ad(exp(−v Δt)), Δt I], [0, I]]`` and a white-acceleration ``Q`` on the velocity.
+* **Update** with the registered pose ``T*`` and the registration's own information ``H`` (left
+  perturbation in the target frame, converted to the body frame with the adjoint): the pose
+  prior used inside the registration is this filter's ``P_pp``, so ``T*`` already is the
+  posterior mean of the pose; the velocity follows by Gaussian conditioning,
+  ``v ← v + P_vp P_pp⁻¹ log(T_pred⁻¹ T*)``, and ``P ← P − P_{:,p} G P_{p,:}`` with
+  ``G = H (P_pp H + I)⁻¹`` (well defined when ``H`` is singular: a direction the scan did not
+  see leaves both the pose and the velocity to the model).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from relnav.geometry.se3 import exp_se3, invert, log_se3
+
+__all__ = ["ConstantVelocityFilter", "adjoint"]
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """SE(3) adjoint for twists ``[ρ, φ]``: ``[[R, [t]×R], [0, R]]`` (6×6)."""
+    R, t = T[:3, :3], T[:3, 3]
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[:3, 3:] = tx @ R
+    A[3:, 3:] = R
+    return A
+
+
+class ConstantVelocityFilter:
+    """Error-state Kalman filter of pose and body-frame velocity (see the module doc).
+
+    Parameters
+    ----------
+    pose : (4, 4) float64
+        Initial ``T_target_sensor``.
+    t0 : float
+        Its time, s.
+    sigma_v0 : (6,) float64
+        1σ of the unknown initial velocity, ``[m/s ×3, rad/s ×3]``.
+    sigma_acc : (6,) float64
+        White-acceleration 1σ: change of the velocity per step, ``[m/s ×3, rad/s ×3]``.
+    """
+
+    def __init__(
+        self, pose: np.ndarray, t0: float, sigma_v0: np.ndarray, sigma_acc: np.ndarray
+    ) -> None:
+        self.pose = np.array(pose, dtype=np.float64)
+        self.t = float(t0)
+        self.velocity = np.zeros(6)
+        self.P = np.zeros((12, 12))
+        self.P[:6, :6] = np.eye(6) * 1e-12
+        self.P[6:, 6:] = np.diag(np.asarray(sigma_v0, dtype=float) ** 2)
+        self.sigma_acc = np.asarray(sigma_acc, dtype=float)
+        self._pred: tuple[np.ndarray, np.ndarray, float] | None = None
+
+    def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted pose and its body-frame covariance ``P_pp`` (6×6) at time ``t``."""
+        dt = float(t) - self.t
+        if not np.isfinite(dt) or dt <= 0:
+            dt = 1e-9
+        step = exp_se3(self.velocity * dt)
+        F = np.eye(12)
+        F[:6, :6] = adjoint(invert(step))
+        F[:6, 6:] = dt * np.eye(6)
+        Q = np.zeros((12, 12))
+        Q[6:, 6:] = np.diag(self.sigma_acc**2)
+        Q[:6, :6] = np.diag((self.sigma_acc * dt) ** 2) / 3.0
+        P = F @ self.P @ F.T + Q
+        T_pred = self.pose @ step
+        self._pred = (T_pred, 0.5 * (P + P.T), float(t))
+        return T_pred.copy(), self._pred[1][:6, :6].copy()
+
+    def update(self, T_star: np.ndarray, H_left: np.ndarray) -> None:
+        """Accept the registered pose ``T*`` with the scan's information ``H`` (left, target)."""
+        assert self._pred is not None, "predict() first"
+        T_pred, P, t = self._pred
+        Ad = adjoint(T_star)
+        H = Ad.T @ H_left @ Ad
+        Ppp = P[:6, :6]
+        y = log_se3(invert(T_pred) @ T_star)
+        try:
+            self.velocity = self.velocity + P[6:, :6] @ np.linalg.solve(Ppp, y)
+            G = H @ np.linalg.inv(Ppp @ H + np.eye(6))
+        except np.linalg.LinAlgError:
+            G = np.zeros((6, 6))
+        P = P - P[:, :6] @ G @ P[:6, :]
+        self.P = 0.5 * (P + P.T)
+        self.pose = np.array(T_star, dtype=np.float64)
+        self.t = t
+        self._pred = None
+
+    def skip(self) -> None:
+        """No usable measurement: keep the prediction (pose and grown covariance)."""
+        assert self._pred is not None, "predict() first"
+        T_pred, P, t = self._pred
+        self.pose, self.P, self.t = T_pred, P, t
+        self._pred = None
