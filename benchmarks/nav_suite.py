@@ -153,8 +153,11 @@ def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
         if not (d / "scenario.yaml").exists():
             summ = simulate(suite()[name], d, overwrite=True)
             s0 = summ.sensors[0]
-            print(f"simulated {name}: {s0.frames} frames, {s0.mean_points:.0f} pts/scan "
-                  f"({s0.min_points}-{s0.max_points})", file=sys.stderr)
+            print(
+                f"simulated {name}: {s0.frames} frames, {s0.mean_points:.0f} pts/scan "
+                f"({s0.min_points}-{s0.max_points})",
+                file=sys.stderr,
+            )
         folders[name] = d
     return folders
 
@@ -191,7 +194,7 @@ def run_method(seq_dir: Path, method: str, **options: Any) -> dict[str, Any]:
         "ape_r": m["ape_rot_rmse_deg"],
         "rpe_t": m["rpe_trans_rmse"],
         "rpe_r": m["rpe_rot_rmse_deg"],
-        "n_steps": int(len(et)),
+        "n_steps": len(et),
         "wrong": int(wrong.sum()),
         "flagged": int(flagged.sum()),
         "wrong_flagged": int((wrong & flagged).sum()),

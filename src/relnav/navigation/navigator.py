@@ -74,6 +74,9 @@ class NavigatorConfig:
     chi2_gate : float
         Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
         ``ok`` step.
+    min_degeneracy : float
+        Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
+        information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
     sigma_acc_t, sigma_acc_r_deg : float
         Motion model's white acceleration: 1σ change of the per-frame motion from one frame to
         the next, translation in multiples of ``s₀``, rotation in degrees.
@@ -98,6 +101,7 @@ class NavigatorConfig:
     min_points: int = 6
     min_overlap: float = 0.3
     chi2_gate: float = 100.0
+    min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
     sigma_first_t: float = 5.0
@@ -146,7 +150,6 @@ class Navigator:
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
         """Track one scan; returns the pose ``T_target_sensor`` and the step's status."""
-        c = self.config
         t_start = time.perf_counter()
         if isinstance(scan, Scan):
             P, t = scan.points, float(scan.time)
@@ -171,7 +174,13 @@ class Navigator:
                 self.motion.sigma_acc = self.motion.sigma_acc / dt
             self._rescaled = True
         T_pred, P_pp = self.motion.predict(t)
-        result = self._register(P, T_pred, P_pp, timings)
+        try:
+            result = self._register(P, T_pred, P_pp, timings)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
+            log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
+            result = RegistrationResult(
+                T_target_source=T_pred, status="failed", message=f"{type(e).__name__}: {e}"
+            )
         if result.status == "ok":
             self.motion.update(result.T_target_source, result.info.pop("_H"))
             self.pose = self.motion.pose.copy()
@@ -202,7 +211,12 @@ class Navigator:
                 status="failed", message=f"only {len(P)} finite points: no map started"
             )
             return OdometryStep(
-                self.pose.copy(), np.eye(4), res, True, "failed", n_raw,
+                self.pose.copy(),
+                np.eye(4),
+                res,
+                True,
+                "failed",
+                n_raw,
                 time.perf_counter() - t_start,
             )
         self.spacing0 = _spacing(P)
@@ -231,7 +245,12 @@ class Navigator:
         )
         self._rescaled = False
         return OdometryStep(
-            self.pose.copy(), np.eye(4), None, False, "first", n_raw,
+            self.pose.copy(),
+            np.eye(4),
+            None,
+            False,
+            "first",
+            n_raw,
             time.perf_counter() - t_start,
         )
 
@@ -250,7 +269,7 @@ class Navigator:
                 info=info,
             )
         ts = time.perf_counter()
-        radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+        radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), self.spacing0)
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
         Ad = adjoint(T_pred)
@@ -309,10 +328,17 @@ class Navigator:
         )
         status = "ok"
         message = ""
-        if n_pairs < c.min_points:
+        if not (np.all(np.isfinite(T)) and np.all(np.isfinite(H))):
+            status, message = "failed", "non-finite registration"
+        elif n_pairs < c.min_points:
             status, message = "failed", f"{n_pairs} scan points near the model (< {c.min_points})"
         elif overlap < c.min_overlap:
             status, message = "failed", f"overlap {overlap:.2f} with the model (< {c.min_overlap})"
+        elif cond < c.min_degeneracy:
+            status, message = (
+                "degenerate",
+                f"the scan constrains too few directions (eigenvalue ratio {cond:.1e})",
+            )
         elif chi2 > c.chi2_gate:
             status, message = (
                 "failed",

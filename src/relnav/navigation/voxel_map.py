@@ -97,10 +97,14 @@ class VoxelMap:
         w_old = self._w[slots]
         over = (w_old + w_add) > self.max_weight
         scale = np.ones(len(uniq))
-        scale[over] = np.maximum(self.max_weight - w_add[over], 0.0) / np.maximum(w_old[over], 1e-12)
-        self._w[slots] = w_old * scale + w_add
-        self._s1[slots] = self._s1[slots] * scale[:, None] + s1_add
-        self._s2[slots] = self._s2[slots] * scale[:, None, None] + s2_add
+        scale[over] = np.maximum(self.max_weight - w_add[over], 0.0) / np.maximum(
+            w_old[over], 1e-12
+        )
+        w_new = w_old * scale + w_add
+        cap = np.minimum(1.0, self.max_weight / np.maximum(w_new, 1e-12))  # one big batch
+        self._w[slots] = w_new * cap
+        self._s1[slots] = (self._s1[slots] * scale[:, None] + s1_add) * cap[:, None]
+        self._s2[slots] = (self._s2[slots] * scale[:, None, None] + s2_add) * cap[:, None, None]
         self._seen[slots] = frame
         self._touched.update(slots.tolist())
         if self.n > self.max_voxels:
