@@ -27,7 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
+
+from relnav.registration.icp import _kd_query
 
 __all__ = ["ScanToMapFit", "solve_scan_to_map"]
 
@@ -75,7 +76,10 @@ def _rot_log(R: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
 @njit(cache=True)
 def _prior_twist(T: np.ndarray, Tp: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """First-order left twist ``log(T Tp⁻¹)`` = ``[t − R_d t_p, log R_d]``."""
-    Rd = T[:3, :3] @ Tp[:3, :3].T
+    Rd = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            Rd[a, b] = T[a, 0] * Tp[b, 0] + T[a, 1] * Tp[b, 1] + T[a, 2] * Tp[b, 2]
     xi = np.empty(6)
     for a in range(3):
         xi[a] = T[a, 3] - (Rd[a, 0] * Tp[0, 3] + Rd[a, 1] * Tp[1, 3] + Rd[a, 2] * Tp[2, 3])
@@ -175,9 +179,75 @@ def _accumulate(
     return H, g, n_pairs, sw, swd, d2_out
 
 
+@njit(cache=True)
+def _nearest(
+    P: np.ndarray, T: np.ndarray, trees: tuple, gate: float
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Transformed points and the nearest map point of each (two trees; -1: none in the gate)."""
+    mp, mperm, mdim, mval, rp, rperm, rdim, rval, rids = trees
+    X, i_main, d_main = _kd_query(mp, mperm, mdim, mval, P, T, gate, False)
+    _, i_rec, d_rec = _kd_query(rp, rperm, rdim, rval, P, T, gate, False)
+    idx = i_main.copy()
+    for i in range(P.shape[0]):
+        if i_rec[i] >= 0 and d_rec[i] < d_main[i]:
+            idx[i] = rids[i_rec[i]]
+    return X, idx
+
+
+@njit(cache=True)
+def _solve_loop(
+    P: np.ndarray,
+    trees: tuple,
+    M: np.ndarray,
+    Om: np.ndarray,
+    T0: np.ndarray,
+    T_pred: np.ndarray,
+    Lam: np.ndarray,
+    gate: float,
+    c: float,
+    c0: float,
+    decay: float,
+    max_iter: int,
+    tol_t: float,
+    tol_r: float,
+) -> tuple:  # pragma: no cover - numba
+    T = T0.copy()
+    scale = max(c0, c)
+    iters = 0
+    for it in range(max_iter):
+        iters = it + 1
+        X, idx = _nearest(P, T, trees, gate)
+        H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale)
+        xi = _prior_twist(T, T_pred)
+        A = H + Lam
+        b = np.zeros(6)
+        for p in range(6):
+            s = g[p]
+            for q in range(6):
+                s += Lam[p, q] * xi[q]
+            b[p] = -s
+        delta = _solve6(A, b)
+        R = _rodrigues(delta[3], delta[4], delta[5])
+        Tn = np.eye(4)
+        for a in range(3):
+            for bb in range(3):
+                Tn[a, bb] = R[a, 0] * T[0, bb] + R[a, 1] * T[1, bb] + R[a, 2] * T[2, bb]
+            Tn[a, 3] = R[a, 0] * T[0, 3] + R[a, 1] * T[1, 3] + R[a, 2] * T[2, 3] + delta[a]
+        T = Tn
+        annealed = scale <= c
+        scale = max(c, scale * decay)
+        dt = math.sqrt(delta[0] ** 2 + delta[1] ** 2 + delta[2] ** 2)
+        dr = math.sqrt(delta[3] ** 2 + delta[4] ** 2 + delta[5] ** 2)
+        if annealed and dt < tol_t and dr < tol_r:
+            break
+    X, idx = _nearest(P, T, trees, gate)
+    H, g, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c * c)
+    return T, H, n_pairs, iters, sw, swd, d2, idx
+
+
 def solve_scan_to_map(
     P: np.ndarray,
-    tree: cKDTree,
+    trees: tuple,
     M: np.ndarray,
     Om: np.ndarray,
     T0: np.ndarray,
@@ -197,10 +267,10 @@ def solve_scan_to_map(
     ----------
     P : (N, 3) float64
         Scan points, sensor frame, m.
-    tree : scipy.spatial.cKDTree
-        KD-tree over the map points ``M`` (target frame).
+    trees : tuple
+        :attr:`relnav.navigation.voxel_map.VoxelMap.search_trees` (over the map points ``M``).
     M, Om : (K, 3), (K, 3, 3) float64
-        Map points (m) and their information matrices (1/m²).
+        Map points (m, target frame) and their information matrices (1/m²).
     T0, T_pred : (4, 4) float64
         Initial guess and motion-model prediction of ``T_target_sensor``.
     Lam : (6, 6) float64
@@ -209,42 +279,32 @@ def solve_scan_to_map(
         Largest point-to-map distance of a pair, m.
     c : float
         Geman–McClure scale on the Mahalanobis distance.
-    c0, decay : float
-        Graduated non-convexity: the kernel scale starts at ``c0`` and shrinks by ``decay`` per
-        iteration down to ``c``, so that a prediction far from the truth still converges (a
-        tight kernel from the start locks onto the nearest wrong pairs).
     max_iter : int
         Gauss–Newton iterations at most.
     tol_t, tol_r : float
         Stop when the update is below these (m, rad).
+    c0, decay : float
+        Graduated non-convexity: the kernel scale starts at ``c0`` and shrinks by ``decay`` per
+        iteration down to ``c``, so that a prediction far from the truth still converges (a
+        tight kernel from the start locks onto the nearest wrong pairs).
     """
-    T = np.array(T0, dtype=np.float64)
-    c2 = float(c) * float(c)
-    scale = max(float(c0), float(c))
-    iters = 0
-    Pc = np.ascontiguousarray(P, dtype=np.float64)
-    for it in range(max_iter):
-        iters = it + 1
-        X = Pc @ T[:3, :3].T + T[:3, 3]
-        _, idx = tree.query(X, distance_upper_bound=gate)
-        idx = np.where(idx >= len(M), -1, idx).astype(np.int64)
-        H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale)
-        xi = _prior_twist(T, np.ascontiguousarray(T_pred))
-        delta = _solve6(H + Lam, -(g + Lam @ xi))
-        R = _rodrigues(delta[3], delta[4], delta[5])
-        Tn = np.eye(4)
-        Tn[:3, :3] = R @ T[:3, :3]
-        Tn[:3, 3] = R @ T[:3, 3] + delta[:3]
-        T = Tn
-        annealed = scale <= c
-        scale = max(float(c), scale * decay)
-        if annealed and np.linalg.norm(delta[:3]) < tol_t and np.linalg.norm(delta[3:]) < tol_r:
-            break
-    X = Pc @ T[:3, :3].T + T[:3, 3]
-    _, idx = tree.query(X, distance_upper_bound=gate)
-    idx = np.where(idx >= len(M), -1, idx).astype(np.int64)
-    H, _, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c2)
-    return ScanToMapFit(T, H, int(n_pairs), iters, float(sw), float(swd), d2, idx)
+    T, H, n_pairs, iters, sw, swd, d2, idx = _solve_loop(
+        np.ascontiguousarray(P, dtype=np.float64),
+        trees,
+        M,
+        Om,
+        np.ascontiguousarray(T0, dtype=np.float64),
+        np.ascontiguousarray(T_pred, dtype=np.float64),
+        np.ascontiguousarray(Lam, dtype=np.float64),
+        float(gate),
+        float(c),
+        float(c0),
+        float(decay),
+        int(max_iter),
+        float(tol_t),
+        float(tol_r),
+    )
+    return ScanToMapFit(T, H, int(n_pairs), int(iters), float(sw), float(swd), d2, idx)
 
 
 @dataclass

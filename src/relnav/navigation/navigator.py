@@ -281,12 +281,12 @@ class Navigator:
         gate = float(max(motion, 2.0 * v))
         M = self.map.means
         Om = self.map.information
-        tree = self.map.tree
+        trees = self.map.search_trees
         timings["prepare"] = time.perf_counter() - ts
         ts = time.perf_counter()
         fit = solve_scan_to_map(
             P,
-            tree,
+            trees,
             M,
             Om,
             np.ascontiguousarray(T_pred),

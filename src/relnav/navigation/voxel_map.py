@@ -1,39 +1,189 @@
-"""The target model of relnav's navigator: a voxel map of surface statistics in the target frame.
+"""The target model of relnav's navigator: a fine voxel map of surface points in the target frame.
 
-Each occupied voxel (edge ``voxel_size`` metres, fixed in the target frame) keeps the running
-first and second moments of the scan points that fell into it, so that it describes a small
-patch of surface: its mean ``μ`` (m) and covariance ``C`` (m²). Registration uses each voxel as
-a Gaussian (generalised ICP against voxel distributions, as VGICP/NDT do): the information
-matrix :meth:`VoxelMap.information` is a plane-like ``Ω = V diag(1/λ₁', 1/λ₂', 1/λ₃') Vᵀ`` built
-from ``C``'s eigen-decomposition with floors, weak in the patch's plane and strong along its
-normal.
+Each occupied voxel (edge ``voxel_size`` metres, fixed in the target frame) keeps the running mean
+of the scan points that fell into it (weights saturate at ``max_weight``, so a patch built during
+drift follows where new scans put it); with a voxel a fraction of the scan spacing, the map is a
+density-capped accumulation of all accepted scans: much denser than one sparse scan.
 
-The map is bounded: a voxel's moments saturate at ``max_weight`` observations (older points are
-forgotten geometrically, so a patch built during drift is pulled to where new scans put it) and,
-above ``max_voxels``, the voxels seen least recently are dropped.
+Each map point carries a plane-like information matrix (:func:`plane_information`) from its
+``k`` nearest map neighbours: strong along the local normal, weak along the surface, so that a scan
+point is pulled onto the surface, not onto the sample positions of earlier scans.
+
+**Search structure.** A KD-tree over all points is rebuilt only when the points added since the
+last rebuild exceed a fraction of the map (``rebuild_fraction``); the recent points have a small
+tree of their own, rebuilt each frame, and a query takes the closer of the two answers. Only the
+points of the voxels an update touched get their information recomputed. The cost of a frame is
+therefore about linear in the scan size, not in the map size.
+
+The map is bounded: above ``max_voxels`` the least recently seen voxels are dropped.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
-__all__ = ["VoxelMap"]
+from relnav.registration.icp import _jacobi_eigh, _kd_build
+
+__all__ = ["VoxelMap", "plane_information"]
+
+
+@njit(cache=True)
+def _plane_info_kernel(
+    M: np.ndarray, nb: np.ndarray, inplane_var: float, noise_var: float
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Information and normal of each row's neighbourhood ``M[nb[i]]`` (-1 entries skipped)."""
+    q = nb.shape[0]
+    info = np.zeros((q, 3, 3))
+    nrm = np.zeros((q, 3))
+    C = np.zeros((3, 3))
+    for i in range(q):
+        m = 0
+        c0 = c1 = c2 = 0.0
+        for j in range(nb.shape[1]):
+            k = nb[i, j]
+            if k < 0:
+                continue
+            c0 += M[k, 0]
+            c1 += M[k, 1]
+            c2 += M[k, 2]
+            m += 1
+        if m < 3:
+            for a in range(3):
+                info[i, a, a] = 1.0 / inplane_var
+            nrm[i, 2] = 1.0
+            continue
+        c0 /= m
+        c1 /= m
+        c2 /= m
+        for a in range(3):
+            for b in range(3):
+                C[a, b] = 0.0
+        for j in range(nb.shape[1]):
+            k = nb[i, j]
+            if k < 0:
+                continue
+            d0, d1, d2 = M[k, 0] - c0, M[k, 1] - c1, M[k, 2] - c2
+            C[0, 0] += d0 * d0
+            C[0, 1] += d0 * d1
+            C[0, 2] += d0 * d2
+            C[1, 1] += d1 * d1
+            C[1, 2] += d1 * d2
+            C[2, 2] += d2 * d2
+        C[1, 0], C[2, 0], C[2, 1] = C[0, 1], C[0, 2], C[1, 2]
+        for a in range(3):
+            for b in range(3):
+                C[a, b] /= m
+        w, V = _jacobi_eigh(C)
+        s = 0
+        for a in range(1, 3):
+            if w[a] < w[s]:
+                s = a
+        n0, n1, n2 = V[0, s], V[1, s], V[2, s]
+        l0 = max(w[s], 0.0) + noise_var
+        nrm[i, 0], nrm[i, 1], nrm[i, 2] = n0, n1, n2
+        nv = (n0, n1, n2)
+        for a in range(3):
+            for b in range(3):
+                nn = nv[a] * nv[b]
+                info[i, a, b] = nn / l0 + ((1.0 if a == b else 0.0) - nn) / inplane_var
+    return info, nrm
+
+
+@njit(cache=True)
+def _merge_recent_knn(
+    Q: np.ndarray,
+    d_main: np.ndarray,
+    i_main: np.ndarray,
+    R: np.ndarray,
+    r_ids: np.ndarray,
+    k: int,
+) -> np.ndarray:  # pragma: no cover - numba
+    """The ``k`` nearest of (the main tree's answer) ∪ (brute force over the recent points)."""
+    q = Q.shape[0]
+    out = np.full((q, k), -1, np.int64)
+    bd = np.empty(k)
+    bi = np.empty(k, np.int64)
+    for i in range(q):
+        for j in range(k):
+            bd[j] = d_main[i, j] if j < d_main.shape[1] else np.inf
+            bi[j] = i_main[i, j] if j < i_main.shape[1] else -1
+        for r in range(R.shape[0]):
+            d0, d1, d2 = R[r, 0] - Q[i, 0], R[r, 1] - Q[i, 1], R[r, 2] - Q[i, 2]
+            d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            worst = 0
+            for j in range(1, k):
+                if bd[j] > bd[worst]:
+                    worst = j
+            if d < bd[worst]:
+                bd[worst] = d
+                bi[worst] = r_ids[r]
+        for j in range(k):
+            out[i, j] = bi[j] if np.isfinite(bd[j]) else -1
+    return out
+
+
+def plane_information(
+    points: np.ndarray, neighbors: np.ndarray, inplane_sigma: float, noise_floor: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plane-like information matrices of neighbourhoods.
+
+    For the neighbourhood ``points[neighbors[i]]`` with covariance ``C``, normal ``n`` (the
+    eigenvector of the smallest eigenvalue ``λ₀``):
+    ``Ω = n nᵀ / (λ₀ + σ_n²) + (I − n nᵀ) / σ_p²`` — strong along the normal, weak along the
+    surface **[interpretation: GICP's plane regularisation with physical scales]**. Fewer than 3
+    neighbours give ``Ω = I / σ_p²``.
+
+    Parameters
+    ----------
+    points : (M, 3) float64
+        Map points, m.
+    neighbors : (Q, k) int
+        Indices of each neighbourhood (``-1`` = none).
+    inplane_sigma, noise_floor : float
+        ``σ_p`` and ``σ_n`` in metres.
+
+    Returns
+    -------
+    info : (Q, 3, 3) float64
+        Information matrices, 1/m².
+    normals : (Q, 3) float64
+        Unit normals (sign arbitrary).
+    """
+    return _plane_info_kernel(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(neighbors, dtype=np.int64),
+        float(inplane_sigma) ** 2,
+        float(noise_floor) ** 2,
+    )
+
+
+_FAR = np.full((1, 3), 1e18)
 
 
 class VoxelMap:
-    """Voxel map of surface moments in the target frame.
+    """Voxel map of surface points in the target frame (see the module doc).
 
     Parameters
     ----------
     voxel_size : float
         Voxel edge, metres.
     max_weight : float
-        Observations after which a voxel's moments are scaled down (exponential forgetting).
+        Observations after which a voxel's running mean forgets geometrically.
     max_voxels : int
         Bound on the number of voxels; the least recently updated ones go first.
     noise_floor : float
         Smallest standard deviation (m) along a patch's normal (sensor noise and map blur).
+    inplane_sigma : float, optional
+        Standard deviation (m) along a patch's plane (default ``2 · voxel_size``).
+    k_neighbors : int
+        Map points per patch.
+    rebuild_fraction : float
+        Rebuild the main search tree when the points added since the last rebuild exceed this
+        fraction of the map.
     """
 
     def __init__(
@@ -45,6 +195,7 @@ class VoxelMap:
         noise_floor: float = 0.02,
         inplane_sigma: float | None = None,
         k_neighbors: int = 10,
+        rebuild_fraction: float = 0.1,
     ) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
@@ -54,22 +205,23 @@ class VoxelMap:
         self.noise_floor = float(noise_floor)
         self.inplane_sigma = float(inplane_sigma) if inplane_sigma else 2.0 * self.voxel_size
         self.k_neighbors = int(k_neighbors)
+        self.rebuild_fraction = float(rebuild_fraction)
         self._index: dict[tuple[int, int, int], int] = {}
         cap = 1024
         self._w = np.zeros(cap)
         self._s1 = np.zeros((cap, 3))
-        self._s2 = np.zeros((cap, 3, 3))
         self._seen = np.zeros(cap, dtype=np.int64)
         self._keys = np.zeros((cap, 3), dtype=np.int64)
+        self._info_all = np.zeros((cap, 3, 3))
+        self._normal_all = np.zeros((cap, 3))
         self.n = 0
-        self._mean: np.ndarray | None = None
-        self._info: np.ndarray | None = None
-        self._normal: np.ndarray | None = None
-        self._tree: cKDTree | None = None
-        self._info_all: np.ndarray | None = None
-        self._normal_all: np.ndarray | None = None
         self._touched: set[int] = set()
-        self._stale_all = True
+        self._n_main = 0  # points [0, n_main) are in the main trees
+        self._main_ckd: cKDTree | None = None
+        self._main_nb: tuple[np.ndarray, ...] | None = None
+        self._recent_nb: tuple[np.ndarray, ...] | None = None
+        self._mean: np.ndarray | None = None
+        self._dirty = True
 
     def __len__(self) -> int:
         return self.n
@@ -84,45 +236,39 @@ class VoxelMap:
         uniq, inv = np.unique(keys, axis=0, return_inverse=True)
         inv = inv.ravel()
         slots = np.empty(len(uniq), dtype=np.int64)
+        get = self._index.get
         for u, key in enumerate(map(tuple, uniq.tolist())):
-            i = self._index.get(key)
-            if i is None:
-                i = self._append(key)
-            slots[u] = i
+            i = get(key)
+            slots[u] = self._append(key) if i is None else i
         w_add = np.bincount(inv, minlength=len(uniq)).astype(float)
         s1_add = np.zeros((len(uniq), 3))
         np.add.at(s1_add, inv, P)
-        s2_add = np.zeros((len(uniq), 3, 3))
-        np.add.at(s2_add, inv, P[:, :, None] * P[:, None, :])
         w_old = self._w[slots]
         over = (w_old + w_add) > self.max_weight
         scale = np.ones(len(uniq))
-        scale[over] = np.maximum(self.max_weight - w_add[over], 0.0) / np.maximum(
-            w_old[over], 1e-12
-        )
+        scale[over] = np.maximum(self.max_weight - w_add[over], 0.0) / np.maximum(w_old[over], 1e-12)
         w_new = w_old * scale + w_add
         cap = np.minimum(1.0, self.max_weight / np.maximum(w_new, 1e-12))  # one big batch
         self._w[slots] = w_new * cap
         self._s1[slots] = (self._s1[slots] * scale[:, None] + s1_add) * cap[:, None]
-        self._s2[slots] = (self._s2[slots] * scale[:, None, None] + s2_add) * cap[:, None, None]
         self._seen[slots] = frame
         self._touched.update(slots.tolist())
         if self.n > self.max_voxels:
             self._evict()
-        self._mean = self._info = self._normal = self._tree = None
+        self._dirty = True
 
     def _append(self, key: tuple[int, int, int]) -> int:
         if self.n == len(self._w):
             cap = 2 * len(self._w)
             self._w = np.resize(self._w, cap)
             self._s1 = np.resize(self._s1, (cap, 3))
-            self._s2 = np.resize(self._s2, (cap, 3, 3))
             self._seen = np.resize(self._seen, cap)
             self._keys = np.resize(self._keys, (cap, 3))
+            self._info_all = np.resize(self._info_all, (cap, 3, 3))
+            self._normal_all = np.resize(self._normal_all, (cap, 3))
         i = self.n
         self._w[i] = 0.0
         self._s1[i] = 0.0
-        self._s2[i] = 0.0
         self._keys[i] = key
         self._index[key] = i
         self.n += 1
@@ -130,14 +276,12 @@ class VoxelMap:
 
     def _evict(self) -> None:
         keep = np.sort(np.argsort(-self._seen[: self.n], kind="stable")[: self.max_voxels])
-        self._w = self._w[keep].copy()
-        self._s1 = self._s1[keep].copy()
-        self._s2 = self._s2[keep].copy()
-        self._seen = self._seen[keep].copy()
-        self._keys = self._keys[keep].copy()
+        for name in ("_w", "_s1", "_seen", "_keys", "_info_all", "_normal_all"):
+            setattr(self, name, getattr(self, name)[keep].copy())
         self.n = len(keep)
         self._index = {tuple(k): i for i, k in enumerate(self._keys[: self.n].tolist())}
-        self._stale_all = True
+        self._touched = set(range(self.n))
+        self._n_main = 0  # force a rebuild
 
     # ------------------------------------------------------------------ queries
     @property
@@ -153,122 +297,62 @@ class VoxelMap:
     @property
     def means(self) -> np.ndarray:
         """``(M, 3)`` voxel means in the target frame, m."""
-        if self._mean is None:
-            self._compute()
+        self._refresh()
         assert self._mean is not None
         return self._mean
 
     @property
     def information(self) -> np.ndarray:
-        """``(M, 3, 3)`` information matrices of the voxel Gaussians, 1/m²."""
-        if self._info is None:
-            self._compute()
-        assert self._info is not None
-        return self._info
+        """``(M, 3, 3)`` information matrices of the map points, 1/m²."""
+        self._refresh()
+        return self._info_all[: self.n]
 
     @property
     def normals(self) -> np.ndarray:
-        """``(M, 3)`` unit normals (eigenvector of the smallest covariance eigenvalue)."""
-        if self._normal is None:
-            self._compute()
-        assert self._normal is not None
-        return self._normal
+        """``(M, 3)`` unit normals (sign arbitrary)."""
+        self._refresh()
+        return self._normal_all[: self.n]
 
     @property
-    def tree(self) -> cKDTree:
-        """KD-tree over :attr:`means` (rebuilt after each update, on first use)."""
-        if self._tree is None:
-            self._compute()
-        assert self._tree is not None
-        return self._tree
+    def search_trees(self) -> tuple[np.ndarray, ...]:
+        """Numba KD-tree arrays for nearest-map-point queries.
 
-    def _compute(self) -> None:
+        ``(main_pts, main_perm, main_dim, main_val, recent_pts, recent_perm, recent_dim,
+        recent_val, recent_ids)``: the main tree indexes map points ``[0, n_main)``, the recent
+        tree the others (``recent_ids`` maps its indices to map indices).
+        """
+        self._refresh()
+        assert self._main_nb is not None and self._recent_nb is not None
+        return (*self._main_nb, *self._recent_nb)
+
+    def _refresh(self) -> None:
+        if not self._dirty:
+            return
         n = self.n
-        w = self._w[:n]
-        mu = np.ascontiguousarray(self._s1[:n] / w[:, None])
-        tree = cKDTree(mu)
-        if self._info_all is None or len(self._info_all) < n or self._stale_all:
-            affected = np.arange(n)
-        else:
-            touched = np.fromiter(self._touched, dtype=np.int64)
-            if len(touched):
-                _, nb = tree.query(mu[touched], k=min(self.k_neighbors, n))
-                affected = np.unique(np.concatenate([touched, np.asarray(nb).ravel()]))
-            else:
-                affected = touched
-        if self._info_all is None or len(self._info_all) < len(self._w):
-            info_all = np.zeros((len(self._w), 3, 3))
-            nrm_all = np.zeros((len(self._w), 3))
-            if self._info_all is not None:
-                m = len(self._info_all)
-                info_all[:m] = self._info_all
-                nrm_all[:m] = self._normal_all
-            self._info_all, self._normal_all = info_all, nrm_all
-        if len(affected):
-            info, nrm = neighbourhood_information(
-                mu, affected, tree, self.k_neighbors, self.inplane_sigma, self.noise_floor
+        mu = np.ascontiguousarray(self._s1[:n] / np.maximum(self._w[:n], 1e-12)[:, None])
+        n_recent = n - self._n_main
+        if self._main_ckd is None or self._n_main == 0 or n_recent > self.rebuild_fraction * n:
+            self._n_main = n
+            self._main_ckd = cKDTree(mu)
+            self._main_nb = _kd_build(mu, 8)
+        start = self._n_main
+        recent = np.ascontiguousarray(mu[start:]) if n > start else _FAR
+        ids = np.arange(start, n, dtype=np.int64) if n > start else np.array([-1], np.int64)
+        self._recent_nb = (*_kd_build(recent, 8), ids)
+        touched = np.fromiter(self._touched, dtype=np.int64, count=len(self._touched))
+        if len(touched):
+            k = min(self.k_neighbors, n)
+            kk = min(k, self._n_main)
+            d, i = self._main_ckd.query(mu[touched], k=kk)
+            d = np.asarray(d, dtype=np.float64).reshape(len(touched), kk)
+            i = np.asarray(i, dtype=np.int64).reshape(len(touched), kk)
+            i[~np.isfinite(d)] = -1
+            nb = _merge_recent_knn(
+                mu[touched], d, i, recent if n > start else np.zeros((0, 3)), ids, k
             )
-            self._info_all[affected] = info
-            self._normal_all[affected] = nrm
+            info, nrm = plane_information(mu, nb, self.inplane_sigma, self.noise_floor)
+            self._info_all[touched] = info
+            self._normal_all[touched] = nrm
         self._touched = set()
-        self._stale_all = False
         self._mean = mu
-        self._tree = tree
-        self._info = self._info_all[:n]
-        self._normal = self._normal_all[:n]
-
-
-def neighbourhood_information(
-    points: np.ndarray,
-    which: np.ndarray,
-    tree: cKDTree,
-    k: int,
-    inplane_sigma: float,
-    noise_floor: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Plane-like information matrices from the ``k`` nearest neighbours of ``points[which]``.
-
-    The covariance ``C`` of a point's ``k``-neighbourhood gives its normal ``n`` (eigenvector of
-    the smallest eigenvalue ``λ₀``); the returned information is
-    ``Ω = n nᵀ / (λ₀ + σ_n²) + (I − n nᵀ) / σ_p²``: strong along the normal, weak (``σ_p =
-    inplane_sigma``) along the surface, so a sparse sample does not pull the scan onto its own
-    sample positions **[interpretation: GICP's plane regularisation with physical scales]**.
-    With fewer than 3 points in the map, ``Ω = I / σ_p²``.
-
-    Parameters
-    ----------
-    points : (M, 3) float64
-        Map points, m.
-    which : (Q,) int
-        Indices of the points to compute.
-    tree : cKDTree
-        Tree over ``points``.
-    k : int
-        Neighbourhood size (the point itself included).
-    inplane_sigma, noise_floor : float
-        ``σ_p`` and ``σ_n`` in metres.
-
-    Returns
-    -------
-    info : (Q, 3, 3) float64
-        Information matrices, 1/m².
-    normals : (Q, 3) float64
-        Unit normals (sign arbitrary).
-    """
-    M = len(points)
-    Q = len(which)
-    kk = min(k, M)
-    if kk < 3:
-        normals = np.zeros((Q, 3))
-        normals[:, 2] = 1.0
-        return np.repeat(np.eye(3)[None] / inplane_sigma**2, Q, axis=0), normals
-    _, nb = tree.query(points[which], k=kk)
-    N = points[nb]  # (Q, k, 3)
-    Nc = N - N.mean(axis=1, keepdims=True)
-    C = np.einsum("mki,mkj->mij", Nc, Nc) / kk
-    lam, V = np.linalg.eigh(C)
-    nrm = V[:, :, 0]
-    l0 = np.maximum(lam[:, 0], 0.0) + noise_floor**2
-    nn = nrm[:, :, None] * nrm[:, None, :]
-    info = nn / l0[:, None, None] + (np.eye(3)[None] - nn) / inplane_sigma**2
-    return info, np.ascontiguousarray(nrm)
+        self._dirty = False
