@@ -69,6 +69,9 @@ class NavigatorConfig:
         Gauss–Newton iterations per frame.
     min_points : int
         Scans with fewer finite points are ``failed``.
+    max_points : int
+        Point budget: larger scans are reduced to an evenly spaced subset (in scan order) of
+        this size, for the registration and the map.
     min_overlap : float
         Smallest fraction of scan points with a map voxel within the gate for an ``ok`` step.
     chi2_gate : float
@@ -99,6 +102,7 @@ class NavigatorConfig:
     kernel: float = 3.0
     max_iter: int = 30
     min_points: int = 6
+    max_points: int = 400
     min_overlap: float = 0.3
     chi2_gate: float = 100.0
     min_degeneracy: float = 1e-6
@@ -158,6 +162,9 @@ class Navigator:
         P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
+        budget = self.config.max_points
+        if len(P) > budget:  # point budget: an evenly spaced subset (in scan order)
+            P = P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
         timings: dict[str, float] = {}
 
         if self.map is None:  # first usable frame builds the map

@@ -94,36 +94,39 @@ def _plane_info_kernel(
 
 
 @njit(cache=True)
-def _merge_recent_knn(
-    Q: np.ndarray,
-    d_main: np.ndarray,
-    i_main: np.ndarray,
-    R: np.ndarray,
-    r_ids: np.ndarray,
-    k: int,
+def _merge_knn(
+    d_a: np.ndarray, i_a: np.ndarray, d_b: np.ndarray, i_b: np.ndarray, k: int
 ) -> np.ndarray:  # pragma: no cover - numba
-    """The ``k`` nearest of (the main tree's answer) ∪ (brute force over the recent points)."""
-    q = Q.shape[0]
+    """Indices of the ``k`` nearest of two sorted k-NN answers (``-1``: fewer than ``k``)."""
+    q = d_a.shape[0]
     out = np.full((q, k), -1, np.int64)
-    bd = np.empty(k)
-    bi = np.empty(k, np.int64)
     for i in range(q):
+        a = 0
+        b = 0
         for j in range(k):
-            bd[j] = d_main[i, j] if j < d_main.shape[1] else np.inf
-            bi[j] = i_main[i, j] if j < i_main.shape[1] else -1
-        for r in range(R.shape[0]):
-            d0, d1, d2 = R[r, 0] - Q[i, 0], R[r, 1] - Q[i, 1], R[r, 2] - Q[i, 2]
-            d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            worst = 0
-            for j in range(1, k):
-                if bd[j] > bd[worst]:
-                    worst = j
-            if d < bd[worst]:
-                bd[worst] = d
-                bi[worst] = r_ids[r]
-        for j in range(k):
-            out[i, j] = bi[j] if np.isfinite(bd[j]) else -1
+            da = d_a[i, a] if a < d_a.shape[1] else np.inf
+            db = d_b[i, b] if b < d_b.shape[1] else np.inf
+            if not (np.isfinite(da) or np.isfinite(db)):
+                break
+            if da <= db:
+                out[i, j] = i_a[i, a]
+                a += 1
+            else:
+                out[i, j] = i_b[i, b]
+                b += 1
     return out
+
+
+def _knn(tree: cKDTree, Q: np.ndarray, k: int, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(distances, map indices)`` of the ``k`` nearest tree points, shaped ``(len(Q), k)``."""
+    k = min(k, tree.n)
+    d, i = tree.query(Q, k=k)
+    d = np.asarray(d, dtype=np.float64).reshape(len(Q), k)
+    i = np.asarray(i, dtype=np.int64).reshape(len(Q), k)
+    ok = np.isfinite(d)
+    out = np.full_like(i, -1)
+    out[ok] = ids[i[ok]]
+    return d, out
 
 
 def plane_information(
@@ -246,7 +249,8 @@ class VoxelMap:
         w_old = self._w[slots]
         over = (w_old + w_add) > self.max_weight
         scale = np.ones(len(uniq))
-        scale[over] = np.maximum(self.max_weight - w_add[over], 0.0) / np.maximum(w_old[over], 1e-12)
+        room = np.maximum(self.max_weight - w_add[over], 0.0)
+        scale[over] = room / np.maximum(w_old[over], 1e-12)
         w_new = w_old * scale + w_add
         cap = np.minimum(1.0, self.max_weight / np.maximum(w_new, 1e-12))  # one big batch
         self._w[slots] = w_new * cap
@@ -342,14 +346,13 @@ class VoxelMap:
         touched = np.fromiter(self._touched, dtype=np.int64, count=len(self._touched))
         if len(touched):
             k = min(self.k_neighbors, n)
-            kk = min(k, self._n_main)
-            d, i = self._main_ckd.query(mu[touched], k=kk)
-            d = np.asarray(d, dtype=np.float64).reshape(len(touched), kk)
-            i = np.asarray(i, dtype=np.int64).reshape(len(touched), kk)
-            i[~np.isfinite(d)] = -1
-            nb = _merge_recent_knn(
-                mu[touched], d, i, recent if n > start else np.zeros((0, 3)), ids, k
-            )
+            Q = mu[touched]
+            d_a, i_a = _knn(self._main_ckd, Q, k, np.arange(self._n_main, dtype=np.int64))
+            if n > start:
+                d_b, i_b = _knn(cKDTree(recent), Q, k, ids)
+            else:
+                d_b, i_b = np.full((len(Q), 1), np.inf), np.full((len(Q), 1), -1, np.int64)
+            nb = _merge_knn(d_a, i_a, d_b, i_b, k)
             info, nrm = plane_information(mu, nb, self.inplane_sigma, self.noise_floor)
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
