@@ -6,6 +6,7 @@ perturbation) and covariance ``P`` (12×12).
 
 * **Predict** over ``Δt``: ``T ← T exp(v Δt)``, ``P ← F P Fᵀ + Q`` with
   ``F = [[Ad(exp(−v Δt)), Δt I], [0, I]]`` and a white-acceleration ``Q`` on the velocity.
+* **Adapt**: ``Q`` is scaled by the running normalised innovation (:meth:`adapt`).
 * **Update** with the registered pose ``T*`` and the registration's own information ``H`` (left
   perturbation in the target frame, converted to the body frame with the adjoint): the pose
   prior used inside the registration is this filter's ``P_pp``, so ``T*`` already is the
@@ -61,6 +62,18 @@ class ConstantVelocityFilter:
         self.P[6:, 6:] = np.diag(np.asarray(sigma_v0, dtype=float) ** 2)
         self.sigma_acc = np.asarray(sigma_acc, dtype=float)
         self._pred: tuple[np.ndarray, np.ndarray, float] | None = None
+        self.q_scale = 1.0
+        self.nis_ema: float | None = None
+
+    def adapt(self, chi2: float, dof: int = 6, rate: float = 0.1, max_scale: float = 100.0) -> None:
+        """Scale the process noise by the recent normalised innovation (``χ²/dof``, EMA).
+
+        **[interpretation]** covariance matching: an over-confident model (corrections larger
+        than it predicts) gets a larger ``Q``, never below the nominal one.
+        """
+        r = float(chi2) / dof
+        self.nis_ema = r if self.nis_ema is None else (1 - rate) * self.nis_ema + rate * r
+        self.q_scale = float(np.clip(self.nis_ema, 1.0, max_scale))
 
     def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Predicted pose and its body-frame covariance ``P_pp`` (6×6) at time ``t``."""
@@ -72,8 +85,9 @@ class ConstantVelocityFilter:
         F[:6, :6] = adjoint(invert(step))
         F[:6, 6:] = dt * np.eye(6)
         Q = np.zeros((12, 12))
-        Q[6:, 6:] = np.diag(self.sigma_acc**2)
-        Q[:6, :6] = np.diag((self.sigma_acc * dt) ** 2) / 3.0
+        sa2 = self.q_scale * self.sigma_acc**2
+        Q[6:, 6:] = np.diag(sa2)
+        Q[:6, :6] = np.diag(sa2 * dt**2) / 3.0
         P = F @ self.P @ F.T + Q
         T_pred = self.pose @ step
         self._pred = (T_pred, 0.5 * (P + P.T), float(t))

@@ -77,6 +77,8 @@ class NavigatorConfig:
     chi2_gate : float
         Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
         ``ok`` step.
+    adaptive_noise : bool
+        Scale the motion model's process noise by its recent normalised corrections.
     min_degeneracy : float
         Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
         information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
@@ -105,6 +107,7 @@ class NavigatorConfig:
     max_points: int = 400
     min_overlap: float = 0.3
     chi2_gate: float = 100.0
+    adaptive_noise: bool = True
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -190,6 +193,8 @@ class Navigator:
             )
         if result.status == "ok":
             self.motion.update(result.T_target_source, result.info.pop("_H"))
+            if self.config.adaptive_noise:
+                self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
             ts = time.perf_counter()
             self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
