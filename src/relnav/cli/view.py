@@ -112,7 +112,7 @@ def view(
         None, "--sensor", help="Second sensor's name (scans_<name>/); default the primary."
     ),
     rrd: Path | None = typer.Option(
-        None, "--rrd", help="Also write every scan to a Rerun recording (extra [viz])."
+        None, "--rrd", help="Also write every scan to a Rerun recording (extra \\[viz])."
     ),
     estimate: list[Path] | None = typer.Option(
         None, "--estimate", help="Estimated TUM trajectory to add to the .rrd (repeatable)."
