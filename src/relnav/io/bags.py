@@ -174,6 +174,7 @@ class BagSequence:
         self._iter: Iterator[tuple[int, Scan]] | None = None
         self._ctx: Any = None
         self._next_msg = 0
+        self._last: tuple[int, Scan] | None = None  # the scan odometry and a viewer both ask for
         if not len(self._times):
             logger.warning("%s: topic %s has no messages", self._path, topic)
 
@@ -234,6 +235,8 @@ class BagSequence:
         if not -n <= i < n:
             raise IndexError(f"scan {i} out of range for {n} scans")
         want = self._order[i % n]
+        if self._last is not None and self._last[0] == want:
+            return self._last[1]
         if self._iter is None or want < self._next_msg:
             self._close()
             self._ctx = self._reader_cls([self._path])
@@ -243,6 +246,7 @@ class BagSequence:
         for k, scan in self._iter:
             self._next_msg = k + 1
             if k == want:
+                self._last = (k, scan)
                 return scan
         raise InputError(
             f"{self._path}: message {want} of {self._topic} vanished"

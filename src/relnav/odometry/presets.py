@@ -85,7 +85,7 @@ def _known_names() -> list[str]:
     for prefix, meta in available_methods().items():
         names.append(prefix)
         names.extend(meta["examples"])
-    return names
+    return list(dict.fromkeys(names))
 
 
 def resolve_method(
