@@ -91,7 +91,7 @@ def _pointcloud2(ts, points: np.ndarray, stamp: float, *, layout: str):  # type:
         rows = [data[r * row_step : (r + 1) * row_step] + b"\0" * 8 for r in range(height)]
         data, row_step = b"".join(rows), row_step + 8
     sec = int(np.floor(stamp))
-    t = Time(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))
+    t = Time(sec=sec, nanosec=round((stamp - sec) * 1e9))
     ros1 = "seq" in Header.__dataclass_fields__
     header = Header(seq=0, stamp=t, frame_id="l") if ros1 else Header(stamp=t, frame_id="l")
     return PC2(
@@ -184,7 +184,7 @@ def test_odometry_on_a_recording_equals_the_plain_folder(
     _run(["odometry", str(rec), "--topic", "/points", "-m", METHOD, "--out", str(tmp_path / "b")])
     _run(["odometry", str(folder), "-m", METHOD, "--out", str(tmp_path / "f")])
     t_b, P_b = read_tum(tmp_path / "b" / "estimate.tum")
-    t_f, P_f = read_tum(tmp_path / "f" / "estimate.tum")
+    _, P_f = read_tum(tmp_path / "f" / "estimate.tum")
     np.testing.assert_allclose(t_b, times, atol=1e-9)  # header stamps, not record times
     np.testing.assert_allclose(P_b, P_f, atol=1e-9)  # float64 fields: the very same points
     info = json.loads((tmp_path / "b" / "run.json").read_text())
