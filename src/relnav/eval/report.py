@@ -1483,7 +1483,8 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
     """
     from relnav.eval.store import ResultsStore
 
-    out = Path(out_dir).resolve()
+    given = Path(out_dir)  # the folder as the user wrote it, for the regenerate hint
+    out = given.resolve()
     if grid is None:
         if not (out / GRID_FILE).is_file():
             raise InputError(f"{out}: no {GRID_FILE}; run `relnav benchmark` into it first")
@@ -1513,8 +1514,8 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
         "",
         "Tables: " + ", ".join(f"`tables/{p.name}`" for p in ctx.tables) + ".",
         "",
-        f"Regenerate with `relnav report {out.name}`; rerun missing jobs with "
-        f"`relnav benchmark <grid.yaml> --out {out.name}` (finished jobs are skipped).",
+        f"Regenerate with `relnav report {given}`; rerun missing jobs with "
+        f"`relnav benchmark <grid.yaml> --out {given}` (finished jobs are skipped).",
         "",
     ]
     report = out / "report.md"

@@ -1,0 +1,148 @@
+"""Issue 12 defects, end to end through the CLI: install hints, presets, run.json, slips."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from relnav.cli.main import app, main
+from relnav.errors import ConfigError, RelnavError
+from relnav.odometry.presets import METHOD_PRESETS, resolve_method
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def seq(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    out = tmp_path_factory.mktemp("eco") / "seq"
+    simulate(get_preset("sim-voyager", max_frames=5, seed=1), out)
+    return out
+
+
+@pytest.fixture
+def wide(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A wide CLI console, so long cells are not wrapped across lines."""
+    from relnav.cli._common import console
+
+    monkeypatch.setattr(console, "width", 250)
+
+
+def _main(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, *args: str) -> str:
+    """Run the real entry point (the one-line error printer) and return stdout + stderr."""
+    monkeypatch.setattr(sys, "argv", ["relnav", *args])
+    with pytest.raises(SystemExit) as e:
+        main()
+    assert e.value.code not in (0, None)
+    cap = capsys.readouterr()
+    return cap.out + cap.err
+
+
+# --- defect 1: install hints keep the extra's name ----------------------------------------
+
+
+def test_error_line_keeps_the_extra_in_brackets(monkeypatch, capsys, tmp_path):
+    monkeypatch.setitem(sys.modules, "kiss_icp", None)  # as on a base install
+    text = _main(monkeypatch, capsys, "odometry", str(tmp_path), "-m", "kiss-icp", "-o", "x")
+    assert "pip install 'relnav[baselines]'" in text
+    assert "Traceback" not in text and "0/" not in text  # before any progress bar
+
+
+def test_methods_table_and_help_keep_the_extra(monkeypatch, wide):
+    import relnav.cli.methods as methods_mod
+
+    monkeypatch.setattr(methods_mod, "_extra_available", lambda extra: extra is None)
+    res = runner.invoke(app, ["methods"])
+    assert res.exit_code == 0, res.output
+    assert "pip install 'relnav[baselines]'" in res.output
+    res = runner.invoke(app, ["view", "--help"], terminal_width=200)
+    assert "[viz]" in res.output
+    res = runner.invoke(app, ["odometry", "--help"], terminal_width=200)
+    assert "[viz]" in res.output
+
+
+# --- defect 2: named presets ----------------------------------------------------------------
+
+
+def test_presets_are_listed_with_their_expansion_and_usable(seq, tmp_path, wide):
+    res = runner.invoke(app, ["methods"])
+    assert res.exit_code == 0, res.output
+    for name, p in METHOD_PRESETS.items():
+        assert name in res.output
+        assert p.expansion() in res.output
+    assert "-O grouper_options.seeds=all" in METHOD_PRESETS["extended"].expansion()
+    out = tmp_path / "ext"
+    res = runner.invoke(app, ["odometry", str(seq), "-m", "extended", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    info = json.loads((out / "run.json").read_text())
+    assert info["preset"] == "extended" and info["method"] == "feature:hods+gcc+svd"
+    assert info["options"]["method_options"]["gate_rotation_deg"] == 15.0
+
+
+def test_user_options_override_a_preset():
+    method, opts, preset = resolve_method("extended", {"grouper_options": {"eps": 3}})
+    assert preset == "extended" and method == "feature:hods+gcc+svd"
+    assert opts["grouper_options"] == {"seeds": "all", "eps": 3}
+    assert METHOD_PRESETS["extended"].options["grouper_options"] == {"seeds": "all"}
+
+
+# --- defect 7: did you mean, before the progress bar -----------------------------------------
+
+
+def test_unknown_method_suggests_and_fails_before_work(seq, tmp_path):
+    with pytest.raises(ConfigError, match="did you mean 'icp-point'"):
+        resolve_method("icp_point")
+    res = runner.invoke(app, ["odometry", str(seq), "-m", "icp_point", "-o", str(tmp_path / "o")])
+    assert isinstance(res.exception, RelnavError) and "did you mean" in str(res.exception)
+    assert "0/" not in res.output and not (tmp_path / "o").exists()
+    res = runner.invoke(app, ["demo", "-o", str(tmp_path / "d"), "-m", "icp_point"])
+    assert isinstance(res.exception, RelnavError) and not (tmp_path / "d").exists()
+
+
+def test_li_rotating_path_length_is_the_target_frame_path(tmp_path):
+    from relnav.cli.simulate import _target_frame_path
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    s = simulate(get_preset("li-rotating", max_frames=3), tmp_path / "li")
+    assert s.sensors[0].path_length_m == pytest.approx(0.0, abs=1e-9)  # world frame: static
+    assert _target_frame_path(tmp_path / "li", "scans", 0.0) > 0.1
+
+
+# --- defect 3: runs describe themselves; evaluate keeps odometry's numbers -----------------
+
+
+def test_run_json_and_evaluate_does_not_clobber_odometry_metrics(seq, tmp_path):
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["odometry", str(seq), "-m", "icp-point", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    info = json.loads((out / "run.json").read_text())
+    assert info["method"] == "icp-point" and info["preset"] is None
+    assert info["seed"] == 1  # from the simulated scenario
+    assert info["sequence"]["path"] == str(seq) and info["sequence"]["frames"] == 5
+    h1 = info["sequence"]["content_hash"]
+    assert {"relnav", "numpy", "scipy", "numba"} <= set(info["versions"])
+    assert info["timings"]["median_frame_ms"] > 0 and info["flags"]["frames"] == 5
+    assert set(info["outputs"]) >= {"estimate.tum", "diagnostics.csv", "metrics.json", "run.json"}
+    before = json.loads((out / "metrics.json").read_text())
+    assert before["time_ms"] > 0
+
+    # the Quickstart's evaluate into the same metrics.json keeps odometry's time and flags
+    gt = seq / "gt_T_target_sensor.tum"
+    args = ["evaluate", str(out / "estimate.tum"), str(gt), "--json", str(out / "metrics.json")]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    after = json.loads((out / "metrics.json").read_text())
+    assert after["time_ms"] == before["time_ms"]
+    assert after["flagged_frames"] == before["flagged_frames"]
+    assert after["e_T_avg"] == pytest.approx(before["e_T_avg"], abs=1e-12)
+
+    # same inputs → same content hash; a changed scan → another hash
+    runner.invoke(app, ["odometry", str(seq), "-m", "icp-point", "-o", str(tmp_path / "r2")])
+    assert json.loads((tmp_path / "r2" / "run.json").read_text())["sequence"]["content_hash"] == h1
