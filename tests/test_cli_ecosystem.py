@@ -146,3 +146,57 @@ def test_run_json_and_evaluate_does_not_clobber_odometry_metrics(seq, tmp_path):
     # same inputs → same content hash; a changed scan → another hash
     runner.invoke(app, ["odometry", str(seq), "-m", "icp-point", "-o", str(tmp_path / "r2")])
     assert json.loads((tmp_path / "r2" / "run.json").read_text())["sequence"]["content_hash"] == h1
+
+
+# --- relnav compare ------------------------------------------------------------------------------
+
+
+def test_compare_runs_on_the_sequence_ground_truth_equals_evaluate_and_evo(seq, tmp_path):
+    runs = []
+    for m in ("icp-point", "feature:hods+gcc+svd"):
+        out = tmp_path / m.replace(":", "_").replace("+", "_")
+        res = runner.invoke(app, ["odometry", str(seq), "-m", m, "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        runs.append(out)
+    doc = tmp_path / "cmp" / "compare.json"
+    args = ["compare", *map(str, runs), "--json", str(doc), "--plot-dir", str(tmp_path / "cmp")]
+    res = runner.invoke(app, [*args, "--align", "sim3", "--delta", "2"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "cmp" / "compare.png").is_file()
+    assert (tmp_path / "cmp" / "trajectories.png").is_file()
+    got = json.loads(doc.read_text())
+    assert set(got["runs"]) == {"icp-point", "feature:hods+gcc+svd"}
+    gt = seq / "gt_T_target_sensor.tum"
+    for run, label in zip(runs, ("icp-point", "feature:hods+gcc+svd"), strict=True):
+        ev = tmp_path / f"{run.name}.json"
+        args = ["evaluate", str(run / "estimate.tum"), str(gt), "--json", str(ev)]
+        assert runner.invoke(app, [*args, "--align", "sim3", "--delta", "2"]).exit_code == 0
+        ref = json.loads(ev.read_text())
+        for key in ("ape_trans_rmse", "ape_rot_median", "rpe_trans_max", "rpe_rot_std", "e_RT"):
+            assert got["runs"][label][key] == pytest.approx(ref[key], abs=1e-12), key
+
+    # against evo itself, on the TUM files (--gt given, files instead of folders)
+    evo_metrics = pytest.importorskip("evo.core.metrics")
+    from evo.core import sync
+    from evo.tools import file_interface
+
+    est = runs[0] / "estimate.tum"
+    ref_traj = file_interface.read_tum_trajectory_file(str(gt))
+    est_traj = file_interface.read_tum_trajectory_file(str(est))
+    ref_traj, est_traj = sync.associate_trajectories(ref_traj, est_traj, max_diff=0.01)
+    ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    ape.process_data((ref_traj, est_traj))
+    res = runner.invoke(app, ["compare", str(est), "--gt", str(gt), "--json", str(doc)])
+    assert res.exit_code == 0, res.output
+    mine = json.loads(doc.read_text())["runs"]["estimate"]
+    for stat, value in ape.get_all_statistics().items():
+        assert mine[f"ape_trans_{stat}"] == pytest.approx(value, rel=1e-9, abs=1e-12), stat
+
+
+def test_compare_refuses_runs_of_different_sequences(seq, tmp_path):
+    a = tmp_path / "a.tum"
+    a.write_text((seq / "gt_T_target_sensor.tum").read_text())
+    res = runner.invoke(app, ["compare", str(a)])
+    assert isinstance(res.exception, RelnavError) and "give --gt" in str(res.exception)
+    res = runner.invoke(app, ["compare", str(tmp_path / "nope")])
+    assert isinstance(res.exception, RelnavError) and "no such" in str(res.exception)

@@ -36,6 +36,7 @@ COMMAND_MODULES = [
     "view",
     "odometry",
     "evaluate",
+    "compare",
     "methods",
     "config_cmd",
     "fuse",
