@@ -44,6 +44,7 @@ def write_run_outputs(
     seed: int | None = None,
     timings: dict[str, float] | None = None,
     errors_plot: bool = True,
+    extra_outputs: list[str] | None = None,
 ) -> dict[str, Any]:
     """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
 
@@ -106,7 +107,7 @@ def write_run_outputs(
         sequence=seq,
         seed=seed,
         timings=timings,
-        outputs=[*outputs, "run.json"],
+        outputs=[*outputs, *(extra_outputs or []), "run.json"],
     )
     write_run_info(out, doc)
     return metrics
@@ -198,6 +199,7 @@ def odometry(
             **opts,
         )
     wall = time.perf_counter() - t0
+    out = Path(out)
     if live is not None:
         live.close()
         if live.path is not None:
@@ -205,8 +207,20 @@ def odometry(
                 f"streamed to {live.path} (open with: rerun {live.path})", highlight=False
             )
     out = Path(out)
+    live_file = []
+    if live is not None and live.path is not None:
+        live_file = [
+            str(live.path.relative_to(out)) if live.path.is_relative_to(out) else str(live.path)
+        ]
     m = write_run_outputs(
-        out, run, seq, command="odometry", preset=preset, fmt=fmt, timings={"wall_s": wall}
+        out,
+        run,
+        seq,
+        command="odometry",
+        preset=preset,
+        fmt=fmt,
+        timings={"wall_s": wall},
+        extra_outputs=live_file,
     )
     table = Table(title=f"odometry — {preset or name}")
     table.add_column("quantity")
