@@ -200,3 +200,47 @@ def test_compare_refuses_runs_of_different_sequences(seq, tmp_path):
     assert isinstance(res.exception, RelnavError) and "give --gt" in str(res.exception)
     res = runner.invoke(app, ["compare", str(tmp_path / "nope")])
     assert isinstance(res.exception, RelnavError) and "no such" in str(res.exception)
+
+
+# --- track writes TUM, fuse runs over a sequence against its ground truth -----------------------
+
+
+@pytest.fixture(scope="module")
+def li_seq(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    out = tmp_path_factory.mktemp("li") / "li"
+    simulate(get_preset("li-rotating", max_frames=3), out)
+    return out
+
+
+def test_fuse_over_a_sequence_against_its_ground_truth(li_seq, tmp_path):
+    out = tmp_path / "fz"
+    res = runner.invoke(app, ["fuse", str(li_seq), "--out", str(out), "--max-frames", "2"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "fuse.json").read_text())
+    assert doc["pairs"] == 2 and doc["has_ground_truth"] and doc["lidar"] == "scans_lidar"
+    rows = (out / "fuse.csv").read_text().splitlines()
+    assert len(rows) == 3 and "rot_err_deg" in rows[0]
+    assert (out / "fuse_errors.png").is_file()
+    # paper 2's registration on its own scene: degrees and centimetres, not a wild pose
+    assert doc["ok"] >= 1
+    assert doc["rotation_error_deg"]["max"] < 5.0
+    assert doc["translation_error_m"]["max"] < 0.3
+
+
+def test_track_writes_the_target_pose_as_tum(li_seq, tmp_path):
+    from relnav.io.trajectories import read_tum
+
+    out = tmp_path / "tr"
+    res = runner.invoke(app, ["track", str(li_seq), "--out", str(out), "--no-plots"])
+    assert res.exit_code == 0, res.output
+    t, P = read_tum(out / "target_pose.tum")
+    t_gt, P_gt = read_tum(out / "target_pose_gt.tum")
+    assert len(t) == len(t_gt) == 3
+    assert abs(P[-1, :3, 3] - P_gt[-1, :3, 3]).max() < 0.5  # the target's position, metres
+    doc = tmp_path / "e.json"
+    args = ["evaluate", str(out / "target_pose.tum"), str(out / "target_pose_gt.tum")]
+    assert runner.invoke(app, [*args, "--json", str(doc)]).exit_code == 0
+    assert json.loads(doc.read_text())["n_matched"] == 3
