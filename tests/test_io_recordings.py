@@ -274,3 +274,24 @@ def test_plain_folder_of_scans_and_bad_folders(sim_seq: Path, tmp_path: Path) ->
     empty.mkdir()
     _fails(["odometry", str(empty), "--out", str(tmp_path / "o")], "no scans")
     _fails(["odometry", str(folder), "--topic", "/x", "--out", str(tmp_path)], "--topic is for")
+
+
+def test_recording_without_rosbags_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    from relnav.errors import ConfigError
+
+    (tmp_path / "x.bag").write_bytes(b"#ROSBAG V2.0\n")
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)
+    with pytest.raises(ConfigError, match=r"relnav\[ros\]"):
+        BagSequence(tmp_path / "x.bag")
+
+
+@pytest.mark.parametrize("name", ["bad.bag", "bad.mcap", "bad.db3"])
+def test_corrupt_recording_is_one_clear_error(tmp_path, name):
+    (tmp_path / name).write_bytes(b"not a recording at all" * 10)
+    _fails(
+        ["odometry", str(tmp_path / name), "-m", METHOD, "--out", str(tmp_path / "o")],
+        name,
+        "cannot read recording",
+    )

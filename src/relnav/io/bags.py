@@ -3,7 +3,8 @@
 :class:`BagSequence` exposes the ``sensor_msgs/PointCloud2`` messages of one topic as a sequence
 of :class:`~relnav.types.Scan` (points in the message's frame, metres), like
 :class:`relnav.io.ScanSequence`: ``len(seq)``, ``seq[i]``, ``seq.timestamps``, ``seq.gt_poses``
-(always ``None``: a recording has no ground truth). No ROS installation is needed.
+(always ``None``: a recording has no ground truth). No ROS installation is needed; the reader
+is the optional dependency ``rosbags`` (extra ``[ros]``).
 
 Scan times are the messages' ``header.stamp`` (seconds), not the time the bag recorded them
 **[interpretation]** (the stamp is the acquisition time; the record time includes transport
@@ -134,8 +135,11 @@ class BagSequence:
     def __init__(self, path: str | Path, topic: str | None = None) -> None:
         try:
             from rosbags.highlevel import AnyReader
-        except ImportError:  # pragma: no cover - rosbags is a base dependency
-            raise ConfigError("reading recordings needs rosbags: pip install rosbags") from None
+        except ImportError:
+            raise ConfigError(
+                "reading ROS bags and MCAP files needs the optional dependency rosbags: "
+                "pip install 'relnav[ros]'"
+            ) from None
         self._path = Path(path)
         if not self._path.exists():
             raise InputError(f"{self._path}: no such recording")
