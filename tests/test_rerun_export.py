@@ -69,3 +69,20 @@ def test_odometry_viz_streams_to_an_rrd_when_headless(tmp_path, rng, monkeypatch
     )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "x.rrd").read_bytes()[:3] == b"RRF"
+
+
+def test_view_live_without_a_display_writes_the_recording(tmp_path, rng, monkeypatch):
+    pytest.importorskip("rerun")
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    scans = [rng.normal(size=(50, 3)) for _ in range(3)]
+    write_sequence(tmp_path / "seq", scans, [0.0, 1.0, 2.0], gt_poses=np.stack([np.eye(4)] * 3))
+    res = CliRunner().invoke(
+        app, ["view", str(tmp_path / "seq"), "--out", str(tmp_path / "v.png"), "--live"]
+    )
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "v.rrd").read_bytes()[:3] == b"RRF"

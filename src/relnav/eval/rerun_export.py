@@ -40,8 +40,13 @@ def export_rrd(
     estimates: dict[str, np.ndarray] | None = None,
     sensor: str | None = None,
     max_frames: int | None = None,
-) -> Path:
+    live: bool = False,
+) -> Path | None:
     """Write ``seq_dir``'s scans and trajectories to the Rerun recording ``out``.
+
+    With ``live=True`` they are streamed to a spawned Rerun viewer instead; on a machine
+    without a display (or without the viewer) the recording is written to ``out`` as usual.
+    Returns the file written, or ``None`` when streamed to a viewer.
 
     Parameters
     ----------
@@ -55,6 +60,8 @@ def export_rrd(
         Second sensor's name (``scans_<name>/``).
     max_frames : int, optional
         Export only the first frames.
+    live : bool
+        Stream to a viewer (``relnav view SEQ --live``).
     """
     from relnav.geometry.se3 import transform_points
     from relnav.io.sequences import ScanSequence
@@ -66,7 +73,19 @@ def export_rrd(
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rr.init("relnav", spawn=False)
-    rr.save(str(out))
+    streamed = False
+    if live and _has_display():
+        try:
+            rr.spawn()
+            streamed = True
+        except Exception as e:  # no viewer binary
+            import logging
+
+            logging.getLogger(__name__).warning(
+                "cannot spawn the Rerun viewer (%s): writing %s", e, out
+            )
+    if not streamed:
+        rr.save(str(out))
     if gt is not None:
         rr.log("trajectory/ground_truth", rr.LineStrips3D([gt[:n, :3, 3]]), static=True)
     for name, poses in (estimates or {}).items():
@@ -79,7 +98,17 @@ def export_rrd(
             rr.log("sensor", rr.Points3D(gt[k : k + 1, :3, 3], radii=0.05))
         rr.log("scan", rr.Points3D(pts, radii=0.01))
     rr.disconnect()
-    return out
+    return None if streamed else out
+
+
+def _has_display() -> bool:
+    """False on a Linux machine without X11/Wayland (a server, CI)."""
+    import os
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 class LiveViewer:
@@ -115,16 +144,12 @@ class LiveViewer:
         max_points: int = 20000,
     ) -> None:
         import logging
-        import os
-        import sys
 
         rr = _rerun()
         self._rr = rr
         self.path: Path | None = None
         rr.init(f"relnav/{name}", spawn=False)
-        headless = sys.platform.startswith("linux") and not (
-            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-        )
+        headless = not _has_display()
         if rrd is None and not headless:
             try:
                 rr.spawn()
