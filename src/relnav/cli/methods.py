@@ -41,7 +41,7 @@ def methods() -> None:
     for col in ("preset", "expands to", "description"):
         presets.add_column(col)
     for name, p in METHOD_PRESETS.items():
-        presets.add_row(name, escape(p.expansion()), escape(p.description))
+        presets.add_row(name, escape(p.expansion().replace(" -O ", "\n-O ")), escape(p.description))
     console.print(presets)
     parts = Table(title="parts of feature:<descriptor>+<grouper>+<estimator>")
     for col in ("kind", "name", "description"):
