@@ -28,34 +28,13 @@ import numpy as np
 from relnav.errors import InputError
 from relnav.io.bags import BagSequence, is_recording
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, read_scan
+from relnav.io.sequences import _natural_key, _read_timestamps
 from relnav.io.trajectories import read_kitti
 from relnav.types import Scan
 
 __all__ = ["FileSequence", "content_hash", "open_sequence", "read_kitti_calib_tr"]
 
 logger = logging.getLogger("relnav.io")
-
-
-def _natural_key(name: str) -> list[Any]:
-    import re
-
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
-
-
-def _read_times(p: Path) -> np.ndarray:
-    vals = []
-    for no, line in enumerate(p.read_text(encoding="utf-8-sig").splitlines(), start=1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        try:
-            v = float(s.split()[0].rstrip(","))
-        except ValueError:
-            raise InputError(f"{p}: line {no}: not a number: {s[:40]!r}") from None
-        if not np.isfinite(v):
-            raise InputError(f"{p}: line {no}: NaN or infinite time")
-        vals.append(v)
-    return np.asarray(vals, dtype=np.float64)
 
 
 class FileSequence:
@@ -187,7 +166,7 @@ def _kitti_sequence(folder: Path) -> FileSequence:
     extra: list[Path] = []
     times = None
     if (folder / "times.txt").is_file():
-        times = _read_times(folder / "times.txt")
+        times = _read_timestamps(folder / "times.txt")
         extra.append(folder / "times.txt")
         if len(times) != len(files):
             raise InputError(f"{folder / 'times.txt'}: {len(times)} times for {len(files)} scans")
@@ -229,7 +208,7 @@ def _plain_folder(folder: Path) -> FileSequence:
     extra: list[Path] = []
     for name in ("timestamps.txt", "times.txt"):
         if (folder / name).is_file():
-            times = _read_times(folder / name)
+            times = _read_timestamps(folder / name)
             extra.append(folder / name)
             if len(times) != len(files):
                 raise InputError(f"{folder / name}: {len(times)} times for {len(files)} scans")
