@@ -225,6 +225,9 @@ def test_fuse_over_a_sequence_against_its_ground_truth(li_seq, tmp_path):
     rows = (out / "fuse.csv").read_text().splitlines()
     assert len(rows) == 3 and "rot_err_deg" in rows[0]
     assert (out / "fuse_errors.png").is_file()
+    info = json.loads((out / "run.json").read_text())
+    assert info["command"] == "fuse" and info["method"] == "cga-sphere"
+    assert info["flags"]["pairs"] == 2 and info["sequence"]["content_hash"]
     # paper 2's registration on its own scene: degrees and centimetres, not a wild pose
     assert doc["ok"] >= 1
     assert doc["rotation_error_deg"]["max"] < 5.0
@@ -245,3 +248,28 @@ def test_track_writes_the_target_pose_as_tum(li_seq, tmp_path):
     args = ["evaluate", str(out / "target_pose.tum"), str(out / "target_pose_gt.tum")]
     assert runner.invoke(app, [*args, "--json", str(doc)]).exit_code == 0
     assert json.loads(doc.read_text())["n_matched"] == 3
+    info = json.loads((out / "run.json").read_text())
+    assert info["command"] == "track" and info["method"].startswith("ukf")
+    assert "target_pose.tum" in info["outputs"] and info["flags"]["frames"] == 3
+
+
+def test_evaluate_mixes_tum_and_kitti_files(seq, tmp_path):
+    from relnav.io.trajectories import read_tum, write_kitti
+
+    t, P = read_tum(seq / "gt_T_target_sensor.tum")
+    write_kitti(tmp_path / "gt_kitti.txt", P)  # no times.txt: borrows the TUM file's times
+    doc = tmp_path / "e.json"
+    args = ["evaluate", str(seq / "gt_T_target_sensor.tum"), str(tmp_path / "gt_kitti.txt")]
+    res = runner.invoke(app, [*args, "--json", str(doc)])
+    assert res.exit_code == 0, res.output
+    e = json.loads(doc.read_text())
+    assert e["gt_format"] == "kitti" and e["n_matched"] == len(t)
+    assert e["e_T_max"] < 1e-9
+    write_kitti(tmp_path / "short.txt", P[:3])
+    res = runner.invoke(
+        app, ["evaluate", str(seq / "gt_T_target_sensor.tum"), str(tmp_path / "short.txt")]
+    )
+    assert isinstance(res.exception, RelnavError) and "times.txt" in str(res.exception)
+    (tmp_path / "bad.txt").write_text("1 2 3 4 5\n")
+    res = runner.invoke(app, ["evaluate", str(tmp_path / "bad.txt"), str(tmp_path / "short.txt")])
+    assert isinstance(res.exception, RelnavError) and "expected 8" in str(res.exception)

@@ -237,6 +237,22 @@ def fuse(
         (out / "fuse.json").write_text(
             json.dumps(summary, indent=2, allow_nan=False, default=_num) + "\n"
         )
+        from relnav.io.runinfo import run_info, write_run_info
+        from relnav.io.sequences import ScanSequence
+
+        write_run_info(
+            out,
+            run_info(
+                command="fuse",
+                method=name,
+                options={"m": m, "cluster": cluster, "second_sensor": second_sensor},
+                sequence=ScanSequence(camera_scan),
+                seed=seed,
+                timings={"total_s": summary["total_s"]},
+                outputs=["fuse.csv", "fuse.json", "fuse_errors.png", "run.json"],
+                extra={"flags": {"pairs": summary["pairs"], "flagged": summary["flagged"]}},
+            ),
+        )
         table = Table(title=f"relnav fuse ({name}) over {camera_scan}: {summary['pairs']} pairs")
         table.add_column("quantity")
         table.add_column("median", justify="right")

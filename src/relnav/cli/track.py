@@ -242,6 +242,28 @@ def track(
             rms = summary[key]["rms"]
             table.add_row(f"RMS {key} error x,y,z ({unit})", ", ".join(f"{x:.4g}" for x in rms))
     console.print(table)
+    from relnav.io.runinfo import run_info, write_run_info
+    from relnav.io.sequences import ScanSequence
+
+    written.append(
+        write_run_info(
+            out,
+            run_info(
+                command="track",
+                method=f"{result.filter}:{result.meta.get('observer')}",
+                options={
+                    "filter_options": opts,
+                    "gt_alignment": gt_alignment,
+                    "second_sensor": second_sensor,
+                    "max_frames": max_frames,
+                },
+                sequence=ScanSequence(seq_dir),
+                seed=seed,
+                outputs=[p.name for p in written] + ["run.json"],
+                extra={"flags": {"frames": len(result), "flagged": int(result.n_flagged)}},
+            ),
+        )
+    )
     console.print("wrote " + ", ".join(str(p) for p in written))
 
 
