@@ -1,4 +1,4 @@
-"""`relnav demo` end to end on a few frames: files written, metrics for every method."""
+"""`relnav demo` end to end on a few frames: one folder per method, run.json, plots, table."""
 
 from __future__ import annotations
 
@@ -6,23 +6,42 @@ import json
 
 from typer.testing import CliRunner
 
+from relnav.cli.demo import DEMO_METHODS, run_folder_name
 from relnav.cli.main import app
 
 
-def test_demo_writes_outputs(tmp_path):
+def test_demo_writes_one_folder_per_method_and_a_narrow_table(tmp_path):
     out = tmp_path / "demo"
-    res = CliRunner().invoke(app, ["demo", "--out", str(out), "--frames", "6"])
+    res = CliRunner(env={"COLUMNS": "80"}).invoke(
+        app, ["demo", "--out", str(out), "--frames", "6"], terminal_width=80
+    )
     assert res.exit_code == 0, res.output
-    for name in ("estimate.tum", "diagnostics.csv", "metrics.json", "trajectory.png"):
+    for name in ("metrics.json", "trajectory.png", "errors.png", "run.json"):
         assert (out / name).is_file(), name
+    assert not (out / "estimate.tum").exists()  # no anonymous estimate: one folder per method
     metrics = json.loads((out / "metrics.json").read_text())
-    assert set(metrics["methods"]) == {
-        "feature:hods+gcc+alphabeta",
-        "feature:hods+gcc+svd",
-        "icp-point",
-        "extended",
-    }
-    for m in metrics["methods"].values():
-        assert m["n_frames"] == 6
-        assert m["e_RT"] >= 0
-    assert len((out / "estimate.tum").read_text().splitlines()) == 6
+    assert set(metrics["methods"]) == set(DEMO_METHODS)
+    for m, row in metrics["methods"].items():
+        assert row["n_frames"] == 6
+        assert row["e_RT"] >= 0
+        folder = out / "runs" / run_folder_name(m)
+        assert metrics["folders"][m] == f"runs/{run_folder_name(m)}"
+        for name in ("estimate.tum", "diagnostics.csv", "metrics.json", "errors.png", "run.json"):
+            assert (folder / name).is_file(), (m, name)
+        assert len((folder / "estimate.tum").read_text().splitlines()) == 6
+        info = json.loads((folder / "run.json").read_text())
+        assert info["command"] == "demo" and info["seed"] == 0
+        assert info["sequence"]["frames"] == 6
+        assert info["versions"]["relnav"]
+        assert info["flags"]["frames"] == 6
+        per = json.loads((folder / "metrics.json").read_text())
+        assert per["e_T_avg"] == row["e_T_avg"] and per["time_ms"] is not None
+    ext = json.loads((out / "runs" / "extended" / "run.json").read_text())
+    assert ext["preset"] == "extended" and ext["method"] == "feature:hods+gcc+svd"
+    assert ext["options"]["method_options"]["refine"] == "icp-plane"
+    # the table fits 80 columns: no cut labels, and a legend for the letters
+    lines = res.output.splitlines()
+    assert all(len(line) <= 80 for line in lines), max(lines, key=len)
+    assert "…" not in res.output
+    assert "A = feature:hods+gcc+alphabeta" in res.output
+    assert "rpe_trans_rmse" in res.output

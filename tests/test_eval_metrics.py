@@ -10,7 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from relnav.errors import EstimationError, InputError
 from relnav.eval.metrics import (
+    METRIC_DOCS,
     METRIC_KEYS,
+    STAT_NAMES,
     align_trajectory,
     associate,
     compute_metrics,
@@ -283,14 +285,14 @@ def test_evaluate_with_alignment_recovers_zero_error(rng: np.random.Generator) -
     assert raw["e_T_avg"] > 0.1
     # relative errors do not care about the world frame
     assert raw["rpe_trans_rmse"] < 1e-9 and raw["e_RT"] < 1e-12
-    for align in ("first", "se3"):
+    for align in ("first", "se3", "sim3"):
         m = evaluate_trajectories(t, est, t, gt, align=align)
         assert m["e_T_max"] < 1e-9 and m["e_R_max"] < 1e-6, align
         assert m["align"] == align and m["n_matched"] == 20
     _aligned, T_al = align_trajectory(est, gt, "se3")
     np.testing.assert_allclose(T_al @ T, np.eye(4), atol=1e-9)
     with pytest.raises(InputError, match="alignment"):
-        align_trajectory(est, gt, "sim3")  # type: ignore[arg-type]
+        align_trajectory(est, gt, "affine")  # type: ignore[arg-type]
 
 
 def test_evaluate_subsets_frame_times_by_matches() -> None:
@@ -399,3 +401,59 @@ def test_plots_write_png_files(tmp_path: Path, rng: np.random.Generator) -> None
         plot_errors(tmp_path / "bad.png", gt, {"short": gt[:5]})
     with pytest.raises(InputError, match="PNG"):
         plot_trajectories(tmp_path / "x.pdf", gt, est)
+
+
+@pytest.mark.parametrize(
+    ("delta", "unit", "all_pairs"),
+    [(2, "frames", False), (1.5, "m", False), (1.5, "m", True), (4.0, "deg", False)],
+)
+@pytest.mark.parametrize("align", ["none", "sim3"])
+def test_every_evo_statistic_delta_unit_and_sim3_equal_evo(
+    tmp_path: Path, rng: np.random.Generator, delta: float, unit: str, all_pairs: bool, align: str
+) -> None:
+    """All seven statistics under evo's names, RPE delta in m/deg, sim3 (scale) alignment."""
+    evo_metrics = pytest.importorskip("evo.core.metrics")
+    from evo.tools import file_interface
+
+    gt = smooth_traj(rng, 50)
+    est = perturb(rng, gt, 0.03, 0.02)
+    est[:, :3, 3] *= 0.8  # a scale error only sim3 can remove
+    t = 10.0 + 0.1 * np.arange(50)
+    _write_tum(tmp_path / "gt.tum", t, gt)
+    _write_tum(tmp_path / "est.tum", t, est)
+    ref = file_interface.read_tum_trajectory_file(str(tmp_path / "gt.tum"))
+    traj = file_interface.read_tum_trajectory_file(str(tmp_path / "est.tum"))
+    if align == "sim3":
+        traj.align(ref, correct_scale=True)
+    t_e, P_e = _read_tum(tmp_path / "est.tum")
+    t_g, P_g = _read_tum(tmp_path / "gt.tum")
+    ours = evaluate_trajectories(
+        t_e, P_e, t_g, P_g, align=align, delta=delta, delta_unit=unit, rpe_all_pairs=all_pairs
+    )
+    PR, U = evo_metrics.PoseRelation, evo_metrics.Unit
+    evo_unit = {"frames": U.frames, "m": U.meters, "deg": U.degrees}[unit]
+    for key, metric in (
+        ("ape_trans", evo_metrics.APE(PR.translation_part)),
+        ("ape_rot", evo_metrics.APE(PR.rotation_angle_deg)),
+        ("rpe_trans", evo_metrics.RPE(PR.translation_part, delta, evo_unit, all_pairs=all_pairs)),
+        ("rpe_rot", evo_metrics.RPE(PR.rotation_angle_deg, delta, evo_unit, all_pairs=all_pairs)),
+    ):
+        metric.process_data((ref, traj))
+        stats = metric.get_all_statistics()
+        assert set(stats) == set(STAT_NAMES)
+        for stat, value in stats.items():
+            assert ours[f"{key}_{stat}"] == pytest.approx(value, rel=1e-9, abs=1e-9), (key, stat)
+    # deprecated aliases still present and equal
+    assert ours["rpe_rot_rmse_deg"] == ours["rpe_rot_rmse"]
+    if align == "sim3":
+        assert ours["align_scale"] == pytest.approx(1.25, rel=0.05)
+        assert ours["ape_trans_rmse"] < 0.2  # the 20 % scale error is gone
+
+
+def test_metric_docs_name_every_key_once(rng: np.random.Generator) -> None:
+    gt = smooth_traj(rng, 10)
+    m = compute_metrics(perturb(rng, gt, 0.01, 0.01), gt)
+    assert set(m) == set(METRIC_DOCS)
+    assert m["e_T_avg"] == m["ape_trans_rmse"] and m["e_T_max"] == m["ape_trans_max"]
+    assert m["e_R_euler_peak"] == m["e_R_euler_max"]
+    assert METRIC_DOCS["e_R_euler_max"][1] == "deprecated"

@@ -11,16 +11,6 @@ from relnav.cli._common import console, progress_bar
 DEMO_PRESET = "sim-voyager"
 DEMO_FRAMES = 60
 DEMO_METHODS = ("feature:hods+gcc+alphabeta", "feature:hods+gcc+svd", "icp-point", "extended")
-EXTENDED = (
-    "feature:hods+gcc+svd",
-    {
-        "grouper_options": {"seeds": "all"},
-        "refine": "icp-plane",
-        "gate_rotation_deg": 15.0,
-    },
-)
-"""``extended`` in ``--method``: paper 1's HoD-S pipeline with relnav's extensions — GCC seeded
-from every correspondence, SVD, point-to-plane ICP refinement and a 15° innovation gate."""
 TABLE_KEYS = (
     ("e_T_avg", "m"),
     ("e_T_max", "m"),
@@ -28,11 +18,29 @@ TABLE_KEYS = (
     ("T_error_pct", "%"),
     ("e_R_avg", "deg"),
     ("e_R_max", "deg"),
-    ("e_RT", ""),
+    ("e_RT", "m²+deg²"),
     ("rpe_trans_rmse", "m"),
-    ("rpe_rot_rmse_deg", "deg"),
-    ("time_ms", "ms/frame (median)"),
+    ("rpe_rot_rmse", "deg"),
+    ("time_ms", "ms"),
 )
+"""Rows of the demo table (``relnav evaluate --metrics`` defines each key)."""
+
+
+def short_labels(methods: list[str], width: int = 10) -> dict[str, str]:
+    """Column labels that fit an 80-column table: the name itself when it is at most ``width``
+    characters (presets, ``icp-point``), else a letter ``A``, ``B``, … (explained in a legend)."""
+    out: dict[str, str] = {}
+    letters = iter("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+    for m in methods:
+        out[m] = m if len(m) <= width else next(letters)
+    return out
+
+
+def run_folder_name(method: str) -> str:
+    """A file-system-safe folder name for a method string or preset."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", method).strip("_") or "method"
 
 
 def demo(
@@ -46,74 +54,126 @@ def demo(
         list(DEMO_METHODS),
         "--method",
         "-m",
-        help="Methods to compare (first = main); 'extended' = HoD-S with relnav's extensions.",
+        help="Methods or presets to compare (`relnav methods`); 'extended' = HoD-S with "
+        "relnav's extensions.",
     ),
 ) -> None:
     """Run the whole chain on a built-in scenario (procedural target, ~60 frames).
 
-    Writes sequence/, estimate.tum (first method), estimate_<method>.tum, metrics.json,
-    diagnostics.csv and trajectory.png to --out.
+    Writes OUT/sequence/, one folder per method OUT/runs/<method>/ (estimate.tum,
+    diagnostics.csv, metrics.json, errors.png, run.json), and OUT/metrics.json,
+    OUT/trajectory.png, OUT/errors.png and OUT/run.json for all methods together.
     """
     import json
+    import time
 
     from rich.table import Table
 
-    from relnav.eval.metrics import evaluate_trajectories
-    from relnav.eval.plots import plot_trajectories
+    from relnav.cli.evaluate import json_safe
+    from relnav.cli.odometry import write_run_outputs
+    from relnav.eval.metrics import match_trajectories
+    from relnav.eval.plots import plot_errors, plot_trajectories
+    from relnav.io.runinfo import run_info, write_run_info
     from relnav.io.sequences import ScanSequence
     from relnav.odometry import run_sequence
+    from relnav.odometry.presets import resolve_method
     from relnav.sim.presets import get_preset
     from relnav.sim.scenario import simulate
 
+    resolved = {m: resolve_method(m) for m in method}  # unknown names fail before any work
+    labels = short_labels(list(method))
     out.mkdir(parents=True, exist_ok=True)
     seq_dir = out / "sequence"
     scenario = get_preset(preset, max_frames=frames, seed=seed)
+    timings: dict[str, float] = {}
     with progress_bar() as bar:
         task = bar.add_task(f"simulate {preset}", total=min(frames, scenario.frames))
+        t0 = time.perf_counter()
         simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
+        timings["simulate_s"] = time.perf_counter() - t0
         seq = ScanSequence(seq_dir)
         runs = {}
         for m in method:
+            name, options, _ = resolved[m]
             task = bar.add_task(m, total=len(seq))
-            name, options = EXTENDED if m == "extended" else (m, {})
             runs[m] = run_sequence(
                 seq, name, progress=lambda i, s, t=task: bar.advance(t), **options
             )
 
     metrics: dict[str, dict] = {}
-    for i, (m, run) in enumerate(runs.items()):
-        res = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
-        res["time_ms"] = run.median_time_ms
-        res["time_ms_mean"] = run.mean_time_ms
-        res["flagged_frames"] = run.n_flagged
-        metrics[m] = res
-        if i == 0:
-            run.write(out)
-        else:
-            from relnav.io.trajectories import write_tum
-
-            safe = m.replace(":", "_").replace("+", "_")
-            write_tum(out / f"estimate_{safe}.tum", run.timestamps, run.poses)
+    folders: dict[str, str] = {}
+    for m, run in runs.items():
+        folder = out / "runs" / run_folder_name(m)
+        metrics[m] = write_run_outputs(
+            folder, run, seq, command="demo", preset=resolved[m][2], seed=seed
+        )
+        folders[m] = str(folder.relative_to(out))
     (out / "metrics.json").write_text(
-        json.dumps({"preset": preset, "frames": frames, "seed": seed, "methods": metrics}, indent=2)
+        json.dumps(
+            {
+                "preset": preset,
+                "frames": frames,
+                "seed": seed,
+                "folders": folders,
+                "methods": {m: json_safe(v) for m, v in metrics.items()},
+            },
+            indent=2,
+        )
     )
+    title = f"relnav demo — {preset}, {len(seq)} frames, seed {seed}"
     plot_trajectories(
-        out / "trajectory.png",
-        seq.gt_poses,
-        {m: r.poses for m, r in runs.items()},
-        title=f"relnav demo — {preset}, {len(seq)} frames",
+        out / "trajectory.png", seq.gt_poses, {m: r.poses for m, r in runs.items()}, title=title
+    )
+    matched = {
+        m: match_trajectories(r.timestamps, r.poses, seq.timestamps, seq.gt_poses)
+        for m, r in runs.items()
+    }
+    first = next(iter(matched.values()))
+    plot_errors(
+        out / "errors.png",
+        first.gt_poses,
+        {m: mt.est_poses for m, mt in matched.items()},
+        times=first.times,
+        title=f"{title}: error with respect to the ground truth",
+    )
+    write_run_info(
+        out,
+        run_info(
+            command="demo",
+            method=None,
+            options={
+                m: {"method": resolved[m][0], "preset": resolved[m][2], "options": resolved[m][1]}
+                for m in method
+            },
+            sequence=seq,
+            seed=seed,
+            timings=timings,
+            outputs=["metrics.json", "trajectory.png", "errors.png", "run.json", *folders.values()],
+            extra={"scenario_preset": preset},
+        ),
     )
 
     table = Table(title=f"relnav demo — {preset} ({len(seq)} frames, seed {seed})")
     table.add_column("metric")
     table.add_column("unit")
     for m in runs:
-        table.add_column(m, justify="right")
+        table.add_column(labels[m], justify="right")
     for key, unit in TABLE_KEYS:
         table.add_row(key, unit, *(f"{metrics[m][key]:.4g}" for m in runs))
-    table.add_row("flagged frames", "", *(str(metrics[m]["flagged_frames"]) for m in runs))
+    table.add_row("flagged", "frames", *(str(metrics[m]["flagged_frames"]) for m in runs))
     console.print(table)
-    console.print(f"wrote {out / 'estimate.tum'}, {out / 'metrics.json'}, {out / 'trajectory.png'}")
+    for m in runs:
+        legend = f"{labels[m]} = {m}" if labels[m] != m else m
+        console.print(f"  {legend}: {folders[m]}/", highlight=False)
+    console.print(
+        "  time_ms = median per frame; `relnav evaluate --metrics` defines every metric",
+        highlight=False,
+    )
+    console.print(
+        f"wrote {out / 'metrics.json'}, {out / 'trajectory.png'}, {out / 'errors.png'}, "
+        f"{out / 'run.json'}",
+        highlight=False,
+    )
 
 
 def register(app: typer.Typer) -> None:

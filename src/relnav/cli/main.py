@@ -14,6 +14,7 @@ import sys
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from relnav import __version__
 from relnav.errors import RelnavError
@@ -35,6 +36,7 @@ COMMAND_MODULES = [
     "view",
     "odometry",
     "evaluate",
+    "compare",
     "methods",
     "config_cmd",
     "fuse",
@@ -82,7 +84,8 @@ def main() -> None:
     except RelnavError as e:
         if _STATE["verbose"]:
             err_console.print_exception()
-        err_console.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
+        # escape: messages contain brackets (pip install 'relnav[baselines]') that are not markup
+        err_console.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, soft_wrap=True)
         sys.exit(1)
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")

@@ -1,10 +1,11 @@
-"""``relnav methods``: list every registration method and its building blocks."""
+"""``relnav methods``: list every registration method, the named presets and the building blocks."""
 
 from __future__ import annotations
 
 import importlib.util
 
 import typer
+from rich.markup import escape
 
 from relnav.cli._common import console
 
@@ -18,12 +19,13 @@ def _extra_available(extra: str | None) -> bool:
 
 
 def methods() -> None:
-    """List registration methods, descriptors, groupers and estimators."""
+    """List registration methods, named presets, descriptors, groupers and estimators."""
     from rich.table import Table
 
     from relnav.estimation import available_estimators
     from relnav.features import available_descriptors
     from relnav.matching.grouping import available_groupers
+    from relnav.odometry.presets import METHOD_PRESETS
     from relnav.registration import available_methods
 
     t = Table(title="registration methods (use with `relnav odometry --method`)")
@@ -31,9 +33,16 @@ def methods() -> None:
         t.add_column(col)
     for meta in available_methods().values():
         ok = _extra_available(meta["extra"])
-        avail = "yes" if ok else f"[yellow]needs pip install 'relnav[{meta['extra']}]'[/]"
-        t.add_row(", ".join(meta["examples"]), meta["description"], avail)
+        hint = escape(f"needs pip install 'relnav[{meta['extra']}]'")
+        avail = "yes" if ok else f"[yellow]{hint}[/]"
+        t.add_row(escape(", ".join(meta["examples"])), escape(meta["description"]), avail)
     console.print(t)
+    presets = Table(title="method presets (use the name with `relnav odometry --method`)")
+    for col in ("preset", "expands to", "description"):
+        presets.add_column(col)
+    for name, p in METHOD_PRESETS.items():
+        presets.add_row(name, escape(p.expansion().replace(" -O ", "\n-O ")), escape(p.description))
+    console.print(presets)
     parts = Table(title="parts of feature:<descriptor>+<grouper>+<estimator>")
     for col in ("kind", "name", "description"):
         parts.add_column(col)

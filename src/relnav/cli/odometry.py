@@ -1,21 +1,135 @@
-"""``relnav odometry``: run frame-to-frame odometry over a sequence folder."""
+"""``relnav odometry``: run frame-to-frame odometry over a sequence, a recording or a folder."""
 
 from __future__ import annotations
 
+import time
+from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from relnav.cli._common import console, parse_options, progress_bar
 
 
+class PoseFormat(StrEnum):
+    """Trajectory file format of the estimate."""
+
+    tum = "tum"
+    kitti = "kitti"
+
+
+def prepare_method(method: str, option: list[str] | None) -> tuple[str, dict[str, Any], str | None]:
+    """Expand a preset and check the method and its options before any frame is read.
+
+    Returns ``(method string, options, preset name or None)``; raises
+    :class:`~relnav.errors.ConfigError` (with "did you mean") for an unknown name or bad options.
+    """
+    from relnav.odometry import Odometry
+    from relnav.odometry.presets import resolve_method
+
+    name, opts, preset = resolve_method(method, parse_options(option))
+    Odometry(name, **opts)  # builds the registration: bad options fail here, not after frame 0
+    return name, opts, preset
+
+
+def write_run_outputs(
+    out: Path,
+    run: Any,
+    seq: Any,
+    *,
+    command: str,
+    preset: str | None,
+    fmt: PoseFormat = PoseFormat.tum,
+    seed: int | None = None,
+    timings: dict[str, float] | None = None,
+    errors_plot: bool = True,
+    extra_outputs: list[str] | None = None,
+) -> dict[str, Any]:
+    """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
+
+    With ground truth in ``seq``, ``metrics.json`` holds every metric plus the processing time
+    and flag count, and ``errors.png`` the errors over time. Returns the metrics (``{}``
+    without ground truth).
+    """
+    import json
+
+    from relnav.eval.metrics import evaluate_trajectories
+    from relnav.io.runinfo import run_info, write_run_info
+
+    paths = run.write(out)
+    outputs = [paths["estimate"].name, paths["diagnostics"].name]
+    if fmt == PoseFormat.kitti:
+        import numpy as np
+
+        from relnav.io.trajectories import write_kitti
+
+        write_kitti(out / "estimate_kitti.txt", run.poses)
+        np.savetxt(out / "times.txt", run.timestamps, fmt="%.9f")
+        outputs += ["estimate_kitti.txt", "times.txt"]
+    metrics: dict[str, Any] = {}
+    gt = seq.gt_poses
+    n = len(run.poses)
+    if gt is not None and n >= 2:
+        from relnav.cli.evaluate import json_safe
+
+        metrics = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])
+        metrics.update(
+            time_ms=run.median_time_ms,
+            time_ms_mean=run.mean_time_ms,
+            flagged_frames=run.n_flagged,
+            method=run.method,
+            preset=preset,
+        )
+        (out / "metrics.json").write_text(json.dumps(json_safe(metrics), indent=2) + "\n")
+        outputs.append("metrics.json")
+        if errors_plot:
+            from relnav.eval.metrics import match_trajectories
+            from relnav.eval.plots import plot_errors
+
+            m = match_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])
+            label = preset or run.method
+            plot_errors(
+                out / "errors.png",
+                m.gt_poses,
+                {label: m.est_poses},
+                times=m.times,
+                title=f"{label}: error with respect to the ground truth",
+            )
+            outputs.append("errors.png")
+    if seed is None:  # a simulated sequence records its scenario's seed
+        scenario = getattr(seq, "scenario", None)
+        seed = scenario.get("seed") if isinstance(scenario, dict) else None
+    doc = run_info(
+        command=command,
+        run=run,
+        preset=preset,
+        sequence=seq,
+        seed=seed,
+        timings=timings,
+        outputs=[*outputs, *(extra_outputs or []), "run.json"],
+    )
+    write_run_info(out, doc)
+    return metrics
+
+
 def odometry(
-    seq_dir: Path = typer.Argument(..., help="Sequence folder (scans/, optional gt TUM file)."),
+    seq_dir: Path = typer.Argument(
+        ...,
+        help="Sequence folder (scans/), KITTI folder (velodyne/), plain folder of scans, or a "
+        "recording (.bag, .mcap, .db3, ROS 2 bag folder).",
+    ),
     method: str = typer.Option(
-        "feature:hods+gcc+alphabeta", "--method", "-m", help="Method string (`relnav methods`)."
+        "feature:hods+gcc+alphabeta",
+        "--method",
+        "-m",
+        help="Method string or preset name (`relnav methods` lists both).",
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     sensor: str = typer.Option(None, "--sensor", help="Second-sensor name (scans_<name>/)."),
+    topic: str = typer.Option(
+        None, "--topic", help="PointCloud2 topic of a recording (needed if it has several)."
+    ),
     max_frames: int = typer.Option(None, "--max-frames", help="Stop after N frames."),
     motion_prior: str = typer.Option(
         "constant_velocity", "--motion-prior", help="constant_velocity | identity"
@@ -26,47 +140,100 @@ def odometry(
         "-O",
         help="Method option key=value (repeatable; dots nest: estimator_options.alpha0=0.3).",
     ),
+    fmt: PoseFormat = typer.Option(
+        PoseFormat.tum,
+        "--format",
+        help="tum: estimate.tum; kitti: also estimate_kitti.txt (3x4 poses) and times.txt.",
+    ),
+    viz: bool = typer.Option(
+        False, "--viz", help="Stream scans and trajectories to the Rerun viewer (extra \\[viz])."
+    ),
+    rrd: Path = typer.Option(
+        None,
+        "--rrd",
+        help="Save the live stream to this .rrd (implies --viz; headless default OUT/live.rrd).",
+    ),
 ) -> None:
-    """Estimate the sensor trajectory of a sequence; writes estimate.tum and diagnostics.csv.
+    """Estimate the sensor trajectory; writes estimate.tum, diagnostics.csv and run.json.
 
-    Example: [bold]relnav odometry seq/ --method feature:shot+gcc+kalman --out runs/shot[/]
+    With ground truth (a sequence folder's gt_T_target_sensor.tum, KITTI poses/NN.txt) also
+    metrics.json and errors.png.
+
+    Examples: [bold]relnav odometry seq/ --method extended --out runs/ext[/],
+    [bold]relnav odometry drive.bag --topic /points --method icp-point --out runs/bag[/],
+    [bold]relnav odometry kitti/sequences/00 --method kiss-icp --format kitti --out runs/00[/]
     """
-    import json
-
     from rich.table import Table
 
-    from relnav.io.sequences import ScanSequence
+    from relnav.io.sources import open_sequence
     from relnav.odometry import run_sequence
 
-    seq = ScanSequence(seq_dir, sensor=sensor)
+    name, opts, preset = prepare_method(method, option)
+    seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
     n = len(seq) if max_frames is None else min(len(seq), max_frames)
+    live = None
+    if viz or rrd is not None:
+        from relnav.eval.rerun_export import LiveViewer
+
+        live = LiveViewer(
+            f"odometry {preset or name}",
+            rrd=rrd,
+            gt_poses=seq.gt_poses,
+            fallback_rrd=Path(out) / "live.rrd",
+        )
+    t0 = time.perf_counter()
     with progress_bar() as bar:
-        task = bar.add_task(method, total=n)
+        task = bar.add_task(preset or name, total=n)
+
+        def step(i: int, s: Any) -> None:
+            bar.advance(task)
+            if live is not None:
+                live.log_frame(i, seq[i].points, s.pose)
+
         run = run_sequence(
             seq,
-            method,
+            name,
             motion_prior=motion_prior,  # type: ignore[arg-type]
             max_frames=max_frames,
-            progress=lambda i, step: bar.advance(task),
-            **parse_options(option),
+            progress=step,
+            **opts,
         )
-    paths = run.write(out)
-    table = Table(title=f"odometry — {method}")
+    wall = time.perf_counter() - t0
+    out = Path(out)
+    if live is not None:
+        live.close()
+        if live.path is not None:
+            console.print(
+                f"streamed to {live.path} (open with: rerun {live.path})", highlight=False
+            )
+    out = Path(out)
+    live_file = []
+    if live is not None and live.path is not None:
+        live_file = [
+            str(live.path.relative_to(out)) if live.path.is_relative_to(out) else str(live.path)
+        ]
+    m = write_run_outputs(
+        out,
+        run,
+        seq,
+        command="odometry",
+        preset=preset,
+        fmt=fmt,
+        timings={"wall_s": wall},
+        extra_outputs=live_file,
+    )
+    table = Table(title=f"odometry — {preset or name}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("frames", str(len(run.poses)))
     table.add_row("flagged (kept the motion prior)", str(run.n_flagged))
-    table.add_row("mean time per frame (ms)", f"{run.mean_time_ms:.1f}")
-    if seq.gt_poses is not None:
-        from relnav.eval.metrics import evaluate_trajectories
-
-        m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps[:n], seq.gt_poses[:n])
-        m["time_ms"] = run.mean_time_ms
-        (Path(out) / "metrics.json").write_text(json.dumps(m, indent=2))
-        for key in ("e_T_avg", "e_T_max", "drift", "T_error_pct", "e_R_avg", "e_R_max", "e_RT"):
+    table.add_row("median time per frame (ms)", f"{run.median_time_ms:.1f}")
+    for key in ("e_T_avg", "e_T_max", "drift", "T_error_pct", "e_R_avg", "e_R_max", "e_RT"):
+        if key in m:
             table.add_row(key, f"{m[key]:.4g}")
     console.print(table)
-    console.print(f"wrote {paths['estimate']} and {paths['diagnostics']}")
+    written = sorted(p.name for p in out.iterdir() if p.is_file())
+    console.print(f"wrote {out}/: {', '.join(written)}", highlight=False)
 
 
 def register(app: typer.Typer) -> None:

@@ -172,7 +172,7 @@ def simulate(
         ("mean pts", "right"),
         ("min pts", "right"),
         ("max pts", "right"),
-        ("path length m", "right"),
+        ("path m", "right"),
         ("empty frames", "right"),
     ):
         table.add_column(col, justify=just)  # type: ignore[arg-type]
@@ -184,15 +184,36 @@ def simulate(
             f"{s.mean_points:.1f}",
             str(s.min_points),
             str(s.max_points),
-            f"{s.path_length_m:.2f}",
+            f"{_target_frame_path(out, s.folder, s.path_length_m):.2f}",
             str(s.empty_frames),
         )
     console.print(table)
+    console.print("path m: the sensor's path relative to the target (the ground truth written)")
     t = summary.timings
     console.print(
         f"time {t.get('total', 0.0):.2f} s (scan {t.get('scan', 0.0):.2f} s, "
         f"write {t.get('write', 0.0):.2f} s, setup {t.get('setup', 0.0):.2f} s)"
     )
+
+
+def _target_frame_path(out: Path, folder: str, fallback: float) -> float:
+    """Length of the sensor's path relative to the target (the written ground truth), metres.
+
+    A rotating target seen by a static sensor (``li-rotating``) has a zero world-frame path but
+    a real path in the target frame, which is what odometry estimates and T_error divides by.
+    """
+    import numpy as np
+
+    from relnav.io.sequences import ScanSequence
+
+    sensor = None if folder == "scans" else folder[len("scans_") :]
+    try:
+        gt = ScanSequence(out, sensor=sensor).gt_poses
+    except Exception:  # the summary must not fail on an unreadable file
+        return fallback
+    if gt is None or len(gt) < 2:
+        return fallback
+    return float(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).sum())
 
 
 def register(app: typer.Typer) -> None:

@@ -1,9 +1,10 @@
 """``relnav track``: Paper 2's tracking (twistor UKF or quaternion EKF) over a sequence folder.
 
-Writes ``OUT/track.csv`` (per step: position, velocity, Euler angles, angular velocity with 1σ,
-the observation and, with ground truth, truth and errors), ``OUT/track.png`` (estimate vs truth,
-Paper 2 Figs. 8/13), ``OUT/track_errors.png`` (errors with ±3σ bounds, Fig. 14) and
-``OUT/track.json`` (settings, summary).
+Writes ``OUT/target_pose.tum`` (the target's pose ``T_sensor_body``; ``target_pose_gt.tum``
+with ground truth), ``OUT/track.csv`` (per step: position, velocity, Euler angles, angular
+velocity with 1σ, the observation and, with ground truth, truth and errors),
+``OUT/track.png`` (estimate vs truth, Paper 2 Figs. 8/13), ``OUT/track_errors.png`` (errors
+with ±3σ bounds, Fig. 14) and ``OUT/track.json`` (settings, summary).
 """
 
 from __future__ import annotations
@@ -107,6 +108,28 @@ def plot_track_errors(result: Any, path: Path, *, dpi: int = 120) -> Path:
     return path
 
 
+def write_track_tum(result: Any, out: Path) -> list[Path]:
+    """The target's pose ``T_sensor_body`` per step as TUM: ``target_pose.tum`` (estimate,
+    steps before initialisation left out) and ``target_pose_gt.tum`` (truth, when known), so
+    ``relnav evaluate``, ``relnav compare`` and evo read them."""
+    from relnav.geometry.rotations import quat_to_matrix
+    from relnav.io.trajectories import write_tum
+
+    def poses(pos: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ok = np.isfinite(pos).all(axis=1) & np.isfinite(quat).all(axis=1)
+        T = np.tile(np.eye(4), (int(ok.sum()), 1, 1))
+        q = quat[ok] / np.linalg.norm(quat[ok], axis=1, keepdims=True)
+        T[:, :3, :3] = quat_to_matrix(q)
+        T[:, :3, 3] = pos[ok]
+        return np.asarray(result.time)[ok], T
+
+    written = [write_tum(out / "target_pose.tum", *poses(result.position, result.quat))]
+    if result.truth is not None:
+        tr = result.truth
+        written.append(write_tum(out / "target_pose_gt.tum", *poses(tr.position, tr.quat)))
+    return written
+
+
 def track(
     seq_dir: Path = typer.Argument(..., help="Sequence folder (scans/ = camera, scans_<name>/)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
@@ -193,6 +216,7 @@ def track(
     }
     (out / "track.json").write_text(json.dumps(info, indent=2, default=str))
     written.append(out / "track.json")
+    written += write_track_tum(result, out)
     if plots:
         written.append(plot_track(result, out / "track.png"))
         if result.truth is not None:
@@ -218,6 +242,28 @@ def track(
             rms = summary[key]["rms"]
             table.add_row(f"RMS {key} error x,y,z ({unit})", ", ".join(f"{x:.4g}" for x in rms))
     console.print(table)
+    from relnav.io.runinfo import run_info, write_run_info
+    from relnav.io.sequences import ScanSequence
+
+    written.append(
+        write_run_info(
+            out,
+            run_info(
+                command="track",
+                method=f"{result.filter}:{result.meta.get('observer')}",
+                options={
+                    "filter_options": opts,
+                    "gt_alignment": gt_alignment,
+                    "second_sensor": second_sensor,
+                    "max_frames": max_frames,
+                },
+                sequence=ScanSequence(seq_dir),
+                seed=seed,
+                outputs=[p.name for p in written] + ["run.json"],
+                extra={"flags": {"frames": len(result), "flagged": int(result.n_flagged)}},
+            ),
+        )
+    )
     console.print("wrote " + ", ".join(str(p) for p in written))
 
 

@@ -97,7 +97,10 @@ def render_sequence(
         ax.set_ylabel("y [m]")
         ax.set_zlabel("z [m]")
         if with_path:
-            ax.legend(loc="upper left", fontsize=7, markerscale=3)
+            leg = ax.legend(loc="upper left", fontsize=7, markerscale=3)
+            for h, t in zip(leg.legend_handles, leg.get_texts(), strict=True):
+                if t.get_text() == "start" and hasattr(h, "set_sizes"):
+                    h.set_sizes([25.0])  # markerscale is for the tiny scan dots only
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -112,10 +115,15 @@ def view(
         None, "--sensor", help="Second sensor's name (scans_<name>/); default the primary."
     ),
     rrd: Path | None = typer.Option(
-        None, "--rrd", help="Also write every scan to a Rerun recording (extra [viz])."
+        None, "--rrd", help="Also write every scan to a Rerun recording (extra \\[viz])."
     ),
     estimate: list[Path] | None = typer.Option(
         None, "--estimate", help="Estimated TUM trajectory to add to the .rrd (repeatable)."
+    ),
+    live: bool = typer.Option(
+        False,
+        "--live",
+        help="Stream every scan to the Rerun viewer (extra \\[viz]); headless: writes OUT.rrd.",
     ),
 ) -> None:
     """Draw a few scans mapped into the target frame with the ground truth, and the sensor path.
@@ -124,12 +132,14 @@ def view(
     """
     render_sequence(folder, out, frames=frames, sensor=sensor)
     console.print(f"wrote {out}")
-    if rrd is not None:
+    if rrd is not None or live:
         from relnav.eval.rerun_export import export_rrd
         from relnav.io.trajectories import read_tum
 
         est = {p.stem: read_tum(p)[1] for p in estimate or []}
-        console.print(f"wrote {export_rrd(folder, rrd, estimates=est, sensor=sensor)}")
+        target = rrd if rrd is not None else out.with_suffix(".rrd")
+        written = export_rrd(folder, target, estimates=est, sensor=sensor, live=live)
+        console.print(f"wrote {written}" if written else "streamed to the Rerun viewer")
 
 
 def register(app: typer.Typer) -> None:

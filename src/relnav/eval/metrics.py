@@ -13,13 +13,23 @@ Public functions
 :func:`associate`
     One-to-one nearest-timestamp association (TUM ``associate.py`` / evo style).
 :func:`align_trajectory`
-    ``"none"``, ``"first"`` (evo ``--align_origin``) or ``"se3"`` (Umeyama, evo ``--align``).
+    ``"none"``, ``"first"`` (evo ``--align_origin``), ``"se3"`` (Umeyama, evo ``--align``) or
+    ``"sim3"`` (Umeyama with scale, evo ``--align --correct_scale``).
 :func:`pose_errors`, :func:`relative_pose_errors`
     Per-frame raw errors (for plots and export).
 :func:`compute_metrics`
     All scalar metrics on already associated poses.
 :func:`match_trajectories`, :func:`evaluate_trajectories`
     Associate by timestamps, align, then compute.
+
+Metric names
+------------
+:data:`METRIC_DOCS` is the one place that names and defines every key (unit, origin,
+definition); ``relnav evaluate --metrics`` prints it. Paper 1's metrics keep the paper's
+symbols (``e_T_avg`` is the paper's ``e^T_avg`` — an RMSE, which the paper calls "avg");
+evo's carry evo's statistic names: ``{ape,rpe}_{trans,rot}_{rmse,mean,median,std,min,max,sse}``
+(rotations in degrees, evo's ``angle_deg``). Deprecated aliases (:data:`DEPRECATED_ALIASES`)
+are still written.
 
 References
 ----------
@@ -44,10 +54,18 @@ from relnav.geometry.rotations import matrix_to_euler
 from relnav.geometry.se3 import invert, umeyama
 
 __all__ = [
+    "ALIGN_METHODS",
+    "DELTA_UNITS",
+    "DEPRECATED_ALIASES",
+    "EVO_KEYS",
+    "METRIC_DOCS",
     "METRIC_KEYS",
+    "STAT_NAMES",
     "MatchedTrajectories",
     "PoseErrors",
     "align_trajectory",
+    "apply_alignment",
+    "error_statistics",
     "associate",
     "compute_metrics",
     "evaluate_trajectories",
@@ -55,15 +73,36 @@ __all__ = [
     "metric_units",
     "pose_errors",
     "relative_pose_errors",
+    "rpe_pairs",
 ]
 
 log = logging.getLogger(__name__)
 
-AlignMethod = Literal["none", "first", "se3"]
+AlignMethod = Literal["none", "first", "se3", "sim3"]
+DeltaUnit = Literal["frames", "m", "deg", "rad"]
+
+ALIGN_METHODS: tuple[str, ...] = ("none", "first", "se3", "sim3")
+DELTA_UNITS: tuple[str, ...] = ("frames", "m", "deg", "rad")
+STAT_NAMES: tuple[str, ...] = ("rmse", "mean", "median", "std", "min", "max", "sse")
+"""evo's statistics (``evo.core.metrics.StatisticsType``), in evo's order."""
+EVO_KEYS: tuple[str, ...] = tuple(
+    f"{rel}_{stat}"
+    for rel in ("ape_trans", "ape_rot", "rpe_trans", "rpe_rot")
+    for stat in STAT_NAMES
+)
+"""evo-named keys of :func:`compute_metrics` (APE/RPE translation in m, rotation in deg)."""
+DEPRECATED_ALIASES: dict[str, str] = {
+    "ape_rot_rmse_deg": "ape_rot_rmse",
+    "rpe_rot_rmse_deg": "rpe_rot_rmse",
+    "e_R_euler_max": "e_R_euler_peak",
+}
+"""Old key → current key; the old keys are still written (same value)."""
 RotationError = Literal["geodesic", "euler_mean_diff"]
 AngleUnit = Literal["deg", "rad"]
 
-#: Keys always present in the dictionary returned by :func:`compute_metrics`, in report order.
+#: Keys always present in the dictionary returned by :func:`compute_metrics`, in report order
+#: (also the benchmark store's columns, so it keeps the deprecated aliases; :data:`EVO_KEYS`
+#: and ``e_R_euler_peak`` are present as well).
 METRIC_KEYS: tuple[str, ...] = (
     "n_frames",
     "path_length",
@@ -96,6 +135,45 @@ METRIC_KEYS: tuple[str, ...] = (
 _ORTHO_TOL = 1e-5  # max |RᵀR − I| accepted for a pose's rotation block
 
 
+_P1 = "paper 1 §3.2"
+METRIC_DOCS: dict[str, tuple[str, str, str]] = {
+    "n_frames": ("", "relnav", "associated poses compared"),
+    "path_length": ("m", _P1, "L_GT = Σ ‖t_k+1 − t_k‖ of the ground truth"),
+    "duration_s": ("s", "relnav", "time span of the associated poses"),
+    "drift": ("m", _P1, "end-point error ‖Δ_N‖"),
+    "T_error_pct": ("%", _P1, "T_error = 100 · drift / L_GT"),
+    "e_T_avg": ("m", _P1 + " eq. 27", "e^T_avg = sqrt(mean ‖Δ_k‖²): an RMSE (= ape_trans_rmse)"),
+    "e_T_max": ("m", _P1 + " eq. 28", "e^T_max = max ‖Δ_k‖ (= ape_trans_max)"),
+    "e_x_max": ("m", _P1 + " Table A1", "max |Δ_k,x|"),
+    "e_y_max": ("m", _P1 + " Table A1", "max |Δ_k,y|"),
+    "e_z_max": ("m", _P1 + " Table A1", "max |Δ_k,z|"),
+    "e_x_avg": ("m", _P1 + " Table A1", "mean |Δ_k,x|"),
+    "e_y_avg": ("m", _P1 + " Table A1", "mean |Δ_k,y|"),
+    "e_z_avg": ("m", _P1 + " Table A1", "mean |Δ_k,z|"),
+    "e_R_avg": ("deg", _P1 + " eq. 29", "e^R_avg = sqrt(mean θ_k²), θ_k geodesic: an RMSE"),
+    "e_R_max": ("deg", _P1 + " eq. 30", "e^R_max = max θ_k"),
+    "e_R_euler_avg": ("deg", _P1 + " (legacy)", "sqrt(mean ē_k²), ē_k = mean-Euler difference"),
+    "e_R_euler_peak": ("deg", _P1 + " (legacy)", "signed ē_k of largest magnitude (can be < 0)"),
+    "e_RT": ("m² + deg²", _P1 + " eq. 31", "e^RT = e_RT_trans + e_RT_rot (Burgard, consecutive)"),
+    "e_RT_trans": ("m²", _P1 + " eq. 31", "mean ‖t(E_k)‖² over consecutive frames"),
+    "e_RT_rot": ("deg²", _P1 + " eq. 31", "mean angle(E_k)² over consecutive frames"),
+    "rpe_delta": ("", "evo --delta", "RPE pair distance (unit in rpe_delta_unit)"),
+    "time_ms": ("ms", "relnav", "processing time per frame"),
+}
+for _rel, _what, _unit in (
+    ("ape_trans", "evo_ape -r trans_part: ‖t(T_gt⁻¹ T_est)‖", "m"),
+    ("ape_rot", "evo_ape -r angle_deg: angle(T_gt⁻¹ T_est)", "deg"),
+    ("rpe_trans", "evo_rpe -r trans_part: ‖t(E_i)‖", "m"),
+    ("rpe_rot", "evo_rpe -r angle_deg: angle(E_i)", "deg"),
+):
+    for _stat in STAT_NAMES:
+        _u = _unit + "²" if _stat == "sse" else _unit
+        METRIC_DOCS[f"{_rel}_{_stat}"] = (_u, "evo", f"{_stat} of {_what}")
+for _old, _new in DEPRECATED_ALIASES.items():
+    METRIC_DOCS[_old] = (METRIC_DOCS[_new][0], "deprecated", f"alias of {_new}")
+"""Every metric key → ``(unit, origin, definition)``: the single place metrics are named."""
+
+
 def metric_units(e_rt_rot_unit: AngleUnit = "deg") -> dict[str, str]:
     """Unit of every key of :func:`compute_metrics` (``""`` for counts).
 
@@ -105,7 +183,8 @@ def metric_units(e_rt_rot_unit: AngleUnit = "deg") -> dict[str, str]:
         Angle unit used inside ``e^RT`` (see :func:`compute_metrics`).
     """
     a2 = "deg²" if e_rt_rot_unit == "deg" else "rad²"
-    units = {
+    units = {k: v[0] for k, v in METRIC_DOCS.items()}
+    units |= {
         "n_frames": "",
         "path_length": "m",
         "duration_s": "s",
@@ -181,6 +260,23 @@ def _rotation_angle(R: np.ndarray) -> np.ndarray:
 
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
+
+
+def error_statistics(errors: np.ndarray) -> dict[str, float]:
+    """evo's statistics of a 1-D error array: rmse, mean, median, std (population), min, max,
+    sse (sum of squares); NaN for an empty array."""
+    e = np.asarray(errors, dtype=np.float64).ravel()
+    if not e.size:
+        return dict.fromkeys(STAT_NAMES, float("nan"))
+    return {
+        "rmse": _rms(e),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "min": float(np.min(e)),
+        "max": float(np.max(e)),
+        "sse": float(np.sum(np.square(e))),
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -290,19 +386,22 @@ def align_trajectory(
     ----------
     est_poses, gt_poses : (N, 4, 4) float64
         Associated absolute poses (row ``k`` of both belongs to the same time).
-    method : {"none", "first", "se3"}
+    method : {"none", "first", "se3", "sim3"}
         ``"none"``: unchanged (the estimate already lives in the GT frame, e.g. both
         ``T_target_sensor`` starting from the same first pose). ``"first"``: left-multiply by
         ``T_gt[0] T_est[0]⁻¹`` so the first poses coincide (evo ``--align_origin``).
         ``"se3"``: least-squares rigid alignment of the positions (Umeyama, evo ``--align``;
-        needs 3 poses, ill-posed for collinear positions).
+        needs 3 poses, ill-posed for collinear positions). ``"sim3"``: the same with a scale
+        ``s`` (evo ``--align --correct_scale``): positions become ``s R t_k + t``, rotations
+        ``R R_k`` (the aligned poses stay rigid).
 
     Returns
     -------
     aligned : (N, 4, 4) float64
-        ``T_align @ est_poses``.
+        The estimate in the GT frame (:func:`apply_alignment`).
     T_align : (4, 4) float64
-        The applied transform (GT frame ← estimate frame).
+        The applied transform (GT frame ← estimate frame); for ``"sim3"`` a similarity whose
+        rotation block is ``s R``.
     """
     est = _as_poses("est_poses", est_poses)
     gt = _as_poses("gt_poses", gt_poses)
@@ -318,9 +417,29 @@ def align_trajectory(
         if len(est) < 3:
             raise EstimationError(f"align='se3' needs at least 3 matched poses, got {len(est)}")
         T, _ = umeyama(est[:, :3, 3], gt[:, :3, 3])
+    elif method == "sim3":
+        if len(est) < 3:
+            raise EstimationError(f"align='sim3' needs at least 3 matched poses, got {len(est)}")
+        T, _ = umeyama(est[:, :3, 3], gt[:, :3, 3], with_scale=True)
     else:
-        raise InputError(f"unknown alignment {method!r}; choose one of none, first, se3")
-    return T @ est, T
+        raise InputError(f"unknown alignment {method!r}; choose one of {', '.join(ALIGN_METHODS)}")
+    return apply_alignment(T, est), T
+
+
+def apply_alignment(T_align: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Apply a rigid or similarity alignment ``T_align`` (rotation block ``s R``) to poses.
+
+    Positions map to ``s R t_k + t``, rotations to ``R R_k``; for ``s = 1`` this is
+    ``T_align @ poses``. Returns ``(N, 4, 4)`` rigid poses.
+    """
+    P = np.asarray(poses, dtype=np.float64)
+    T = np.asarray(T_align, dtype=np.float64)
+    sR = T[:3, :3]
+    s = float(np.cbrt(np.linalg.det(sR)))
+    out = P.copy()
+    out[:, :3, :3] = (sR / s) @ P[:, :3, :3]
+    out[:, :3, 3] = P[:, :3, 3] @ sR.T + T[:3, 3]
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -370,8 +489,92 @@ def pose_errors(est_poses: np.ndarray, gt_poses: np.ndarray) -> PoseErrors:
     return PoseErrors(delta=delta, trans=trans, rot_deg=rot_deg, euler_mean_diff_deg=eul)
 
 
+def rpe_pairs(
+    poses: np.ndarray,
+    delta: float,
+    unit: DeltaUnit = "frames",
+    *,
+    all_pairs: bool = False,
+    rel_tol: float = 0.1,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(i, j)`` of the RPE, as evo's ``id_pairs_from_delta`` chooses them.
+
+    Parameters
+    ----------
+    poses : (N, 4, 4) float64
+        The poses the pairs are chosen on (evo: the estimate, after alignment).
+    delta : float
+        Pair distance: frames (integer), metres of travelled path, or degrees/radians of
+        accumulated rotation.
+    unit : {"frames", "m", "deg", "rad"}
+        Unit of ``delta`` (evo ``--delta_unit f|m|d|r``).
+    all_pairs : bool
+        Every start index instead of consecutive, non-overlapping pairs (evo ``--all_pairs``);
+        for metres/angles a pair is kept when its distance is within ``rel_tol · delta``.
+    rel_tol : float
+        evo's ``rel_delta_tol`` (0.1).
+
+    Returns
+    -------
+    i, j : (M,) int64
+    """
+    n = len(poses)
+    if unit not in DELTA_UNITS:
+        raise InputError(f"unknown RPE delta unit {unit!r}; choose one of {', '.join(DELTA_UNITS)}")
+    if not np.isfinite(delta) or delta <= 0:
+        raise InputError(f"RPE delta must be > 0, got {delta}")
+    if unit == "frames":
+        if int(delta) != delta:
+            raise InputError(f"RPE delta in frames must be an integer, got {delta}")
+        d = int(delta)
+        i = np.arange(n - d) if all_pairs else np.arange(0, n, d)[:-1]
+        i = i[i + d < n]
+        return i.astype(np.int64), (i + d).astype(np.int64)
+    if unit == "m":
+        step = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    else:
+        if (unit == "deg" and delta > 180) or (unit == "rad" and delta > np.pi):
+            raise InputError(f"RPE delta angle must be within [0, 180] deg, got {delta} {unit}")
+        step = _rotation_angle(np.swapaxes(poses[:-1, :3, :3], 1, 2) @ poses[1:, :3, :3])
+        delta = float(np.radians(delta)) if unit == "deg" else float(delta)
+    tol = rel_tol * delta
+    if all_pairs:
+        if unit == "m":
+            dist = np.concatenate([[0.0], np.cumsum(step)])
+            ii, jj = [], []
+            for a in range(n - 1):
+                rest = dist[a + 1 :] - dist[a]
+                c = int(np.argmin(np.abs(rest - delta)))
+                if abs(rest[c] - delta) <= tol:
+                    ii.append(a)
+                    jj.append(a + 1 + c)
+            return np.asarray(ii, dtype=np.int64), np.asarray(jj, dtype=np.int64)
+        # angles: direct relative angle between the two poses (evo's all-pairs reading)
+        ii, jj = [], []
+        for a in range(n - 1):
+            ang = _rotation_angle(np.swapaxes(poses[a, :3, :3], 0, 1) @ poses[a + 1 :, :3, :3])
+            hit = np.flatnonzero((ang >= delta - tol) & (ang <= delta + tol)) + a + 1
+            ii.extend([a] * hit.size)
+            jj.extend(hit.tolist())
+        return np.asarray(ii, dtype=np.int64), np.asarray(jj, dtype=np.int64)
+    ii, jj = [], []
+    start, acc = 0, 0.0
+    for k, dk in enumerate(step):
+        acc += float(dk)
+        if acc >= delta:
+            ii.append(start)
+            jj.append(k + 1)
+            start, acc = k + 1, 0.0
+    return np.asarray(ii, dtype=np.int64), np.asarray(jj, dtype=np.int64)
+
+
 def relative_pose_errors(
-    est_poses: np.ndarray, gt_poses: np.ndarray, *, delta: int = 1, all_pairs: bool = False
+    est_poses: np.ndarray,
+    gt_poses: np.ndarray,
+    *,
+    delta: float = 1,
+    all_pairs: bool = False,
+    delta_unit: DeltaUnit = "frames",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Relative pose errors over ``delta`` frames (evo RPE, Burgard's ``δ ⊖ δ*``).
 
@@ -381,11 +584,13 @@ def relative_pose_errors(
     ----------
     est_poses, gt_poses : (N, 4, 4) float64
         Associated absolute poses.
-    delta : int
-        Frame offset ``Δ >= 1``.
+    delta : int or float
+        Frame offset ``Δ >= 1``, or metres / degrees / radians (``delta_unit``).
     all_pairs : bool
         ``False`` (evo's default): consecutive, non-overlapping pairs ``i = 0, Δ, 2Δ, …``;
         ``True``: every ``i = 0 … N−1−Δ`` (evo ``--all_pairs``). Identical for ``Δ = 1``.
+    delta_unit : {"frames", "m", "deg", "rad"}
+        Unit of ``delta``; pairs are chosen on the estimate as evo does (:func:`rpe_pairs`).
 
     Returns
     -------
@@ -398,14 +603,20 @@ def relative_pose_errors(
     gt = _as_poses("gt_poses", gt_poses)
     if est.shape != gt.shape:
         raise InputError(f"est_poses {est.shape} and gt_poses {gt.shape} differ in length")
-    if int(delta) != delta or delta < 1:
-        raise InputError(f"delta must be an integer >= 1 frame, got {delta}")
-    delta = int(delta)
-    if len(est) <= delta:
-        raise InputError(f"relative errors over delta={delta} frames need > {delta} poses")
-    i = np.arange(len(est) - delta) if all_pairs else np.arange(0, len(est) - delta, delta)
-    d_gt = invert(gt[i]) @ gt[i + delta]
-    d_est = invert(est[i]) @ est[i + delta]
+    if delta_unit == "frames":
+        if int(delta) != delta or delta < 1:
+            raise InputError(f"delta must be an integer >= 1 frame, got {delta}")
+        delta = int(delta)
+        if len(est) <= delta:
+            raise InputError(f"relative errors over delta={delta} frames need > {delta} poses")
+    i, j = rpe_pairs(est, delta, delta_unit, all_pairs=all_pairs)
+    if i.size == 0:
+        raise EstimationError(
+            f"RPE delta {delta:g} {delta_unit} gives no pose pair (the estimate moves less); "
+            "use a smaller --delta"
+        )
+    d_gt = invert(gt[i]) @ gt[j]
+    d_est = invert(est[i]) @ est[j]
     E = invert(d_gt) @ d_est
     return np.linalg.norm(E[:, :3, 3], axis=1), np.degrees(_rotation_angle(E[:, :3, :3]))
 
@@ -421,10 +632,11 @@ def compute_metrics(
     *,
     times: np.ndarray | None = None,
     frame_time_s: float | np.ndarray | None = None,
-    delta: int = 1,
+    delta: float = 1,
     rpe_all_pairs: bool = False,
     rotation_error: RotationError = "geodesic",
     e_rt_rot_unit: AngleUnit = "deg",
+    delta_unit: DeltaUnit = "frames",
 ) -> dict[str, float]:
     """All trajectory metrics of Paper 1 §3.2 plus APE/RPE, on already associated poses.
 
@@ -439,9 +651,11 @@ def compute_metrics(
     frame_time_s : float or (N,) float64, optional
         Processing time per frame, seconds; ``time_ms`` is its mean in milliseconds (NaN when
         absent).
-    delta : int
-        Frame offset of the RPE (evo ``--delta``, ``Unit.frames``). ``e^RT`` always uses
+    delta : int or float
+        Pair distance of the RPE (evo ``--delta``) in ``delta_unit``. ``e^RT`` always uses
         consecutive frames (Paper 1).
+    delta_unit : {"frames", "m", "deg", "rad"}
+        Unit of ``delta`` (evo ``--delta_unit``); see :func:`rpe_pairs`.
     rpe_all_pairs : bool
         RPE over every frame pair ``(i, i + delta)`` instead of evo's default non-overlapping
         pairs ``(0, Δ), (Δ, 2Δ), …`` (see :func:`relative_pose_errors`).
@@ -472,8 +686,10 @@ def compute_metrics(
           ``e_RT_trans = mean ‖t(E_k)‖²`` (m²) and ``e_RT_rot = mean angle(E_k)²`` with
           ``E_k = (δ_k^GT)⁻¹ δ_k^est``, ``δ_k = T_k⁻¹ T_{k+1}``. No square root (as printed);
           equals ``rpe_trans_rmse² + rpe_rot_rmse_deg²`` when ``delta == 1``.
-        - ``ape_*`` / ``rpe_*``: RMSE of evo's APE / RPE (``translation_part`` and
-          ``rotation_angle_deg``) of ``T_gt⁻¹ T_est``, resp. ``E_i`` over ``delta`` frames.
+        - ``{ape,rpe}_{trans,rot}_{rmse,mean,median,std,min,max,sse}``: evo's statistics of
+          its APE / RPE (``translation_part`` in m, ``rotation_angle_deg`` in deg) of
+          ``T_gt⁻¹ T_est``, resp. ``E_i`` over ``delta`` (:data:`EVO_KEYS`).
+        - Deprecated aliases :data:`DEPRECATED_ALIASES` (same values).
 
     Raises
     ------
@@ -494,11 +710,18 @@ def compute_metrics(
         )
     if e_rt_rot_unit not in ("deg", "rad"):
         raise InputError(f"e_rt_rot_unit must be 'deg' or 'rad', got {e_rt_rot_unit!r}")
-    if isinstance(delta, bool) or int(delta) != delta or delta < 1:
-        raise InputError(f"delta must be an integer >= 1 frame, got {delta}")
-    delta = int(delta)
-    if n <= delta:
-        raise InputError(f"RPE over delta={delta} frames needs more than {delta} poses, got {n}")
+    if delta_unit not in DELTA_UNITS:
+        raise InputError(f"unknown RPE delta unit {delta_unit!r}; choose one of {DELTA_UNITS}")
+    if delta_unit == "frames":
+        if isinstance(delta, bool) or int(delta) != delta or delta < 1:
+            raise InputError(f"delta must be an integer >= 1 frame, got {delta}")
+        delta = int(delta)
+        if n <= delta:
+            raise InputError(
+                f"RPE over delta={delta} frames needs more than {delta} poses, got {n}"
+            )
+    elif not (np.isfinite(delta) and delta > 0):
+        raise InputError(f"delta must be > 0 {delta_unit}, got {delta}")
 
     duration = float("nan")
     if times is not None:
@@ -541,8 +764,10 @@ def compute_metrics(
 
     rpe_trans, rpe_rot = (
         (rt_trans, rt_rot_deg)
-        if delta == 1
-        else relative_pose_errors(est, gt, delta=delta, all_pairs=rpe_all_pairs)
+        if delta == 1 and delta_unit == "frames"
+        else relative_pose_errors(
+            est, gt, delta=delta, all_pairs=rpe_all_pairs, delta_unit=delta_unit
+        )
     )
 
     out: dict[str, float] = {
@@ -563,6 +788,7 @@ def compute_metrics(
         "e_R_max": e_r_max,
         "e_R_euler_avg": eul_avg,
         "e_R_euler_max": eul_max,
+        "e_R_euler_peak": eul_max,
         "e_RT": e_rt_trans + e_rt_rot,
         "e_RT_trans": e_rt_trans,
         "e_RT_rot": e_rt_rot,
@@ -573,6 +799,14 @@ def compute_metrics(
         "rpe_delta": float(delta),
         "time_ms": time_ms,
     }
+    for rel, errors in (
+        ("ape_trans", pe.trans),
+        ("ape_rot", pe.rot_deg),
+        ("rpe_trans", rpe_trans),
+        ("rpe_rot", rpe_rot),
+    ):
+        for stat, v in error_statistics(errors).items():
+            out[f"{rel}_{stat}"] = v
     return out
 
 
@@ -641,8 +875,8 @@ def match_trajectories(
         raise InputError(f"t_est has {len(te)} stamps but est_poses has {len(est)} poses")
     if len(tg) != len(gt):
         raise InputError(f"t_gt has {len(tg)} stamps but gt_poses has {len(gt)} poses")
-    if align not in ("none", "first", "se3"):
-        raise InputError(f"unknown alignment {align!r}; choose one of none, first, se3")
+    if align not in ALIGN_METHODS:
+        raise InputError(f"unknown alignment {align!r}; choose one of {', '.join(ALIGN_METHODS)}")
     idx_est, idx_gt = associate(te, tg, max_diff=max_diff, offset=offset)
     k = len(idx_est)
     need = max(2, int(min_matches))
@@ -683,11 +917,12 @@ def evaluate_trajectories(
     max_diff: float = 0.01,
     offset: float = 0.0,
     align: AlignMethod = "none",
-    delta: int = 1,
+    delta: float = 1,
     rpe_all_pairs: bool = False,
     frame_time_s: float | np.ndarray | None = None,
     rotation_error: RotationError = "geodesic",
     e_rt_rot_unit: AngleUnit = "deg",
+    delta_unit: DeltaUnit = "frames",
 ) -> dict[str, float | str]:
     """Associate by timestamp, align, and compute every metric of :func:`compute_metrics`.
 
@@ -703,9 +938,9 @@ def evaluate_trajectories(
         Ground-truth absolute poses.
     max_diff, offset
         See :func:`associate` (seconds).
-    align : {"none", "first", "se3"}
+    align : {"none", "first", "se3", "sim3"}
         See :func:`align_trajectory`.
-    delta, rpe_all_pairs, rotation_error, e_rt_rot_unit
+    delta, rpe_all_pairs, rotation_error, e_rt_rot_unit, delta_unit
         See :func:`compute_metrics`.
     frame_time_s : float or (N,) float64, optional
         Processing time per *estimated* frame, seconds.
@@ -714,7 +949,8 @@ def evaluate_trajectories(
     -------
     dict
         :func:`compute_metrics` keys plus ``n_est``, ``n_gt``, ``n_matched`` (counts),
-        ``max_diff``, ``offset`` (s) and ``align`` (str).
+        ``max_diff``, ``offset`` (s), ``align`` and ``rpe_delta_unit`` (str) and
+        ``align_scale`` (the ``sim3`` scale, 1 otherwise).
 
     Raises
     ------
@@ -731,7 +967,7 @@ def evaluate_trajectories(
         max_diff=max_diff,
         offset=offset,
         align=align,
-        min_matches=3 if align == "se3" else 2,
+        min_matches=3 if align in ("se3", "sim3") else 2,
     )
     ft = frame_time_s
     if ft is not None and np.ndim(ft) == 1:
@@ -751,9 +987,12 @@ def evaluate_trajectories(
             rpe_all_pairs=rpe_all_pairs,
             rotation_error=rotation_error,
             e_rt_rot_unit=e_rt_rot_unit,
+            delta_unit=delta_unit,
         )
     )
     out.update(
+        rpe_delta_unit=delta_unit,
+        align_scale=float(np.cbrt(np.linalg.det(m.T_align[:3, :3]))),
         n_est=float(m.n_est),
         n_gt=float(m.n_gt),
         n_matched=float(len(m.idx_est)),

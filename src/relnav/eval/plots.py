@@ -81,11 +81,13 @@ def plot_trajectories(
     gt = None if gt_poses is None else _as_poses("gt_poses", gt_poses)
     if gt is None and not est:
         raise InputError("plot_trajectories: nothing to plot (no ground truth, no estimates)")
-    fig = Figure(figsize=(14.5, 4.8), layout="constrained")
+    fig = Figure(figsize=(15.5, 5.6), layout="constrained")
     FigureCanvasAgg(fig)
-    ax3 = fig.add_subplot(1, 3, 1, projection="3d")
-    ax_top = fig.add_subplot(1, 3, 2)
-    ax_side = fig.add_subplot(1, 3, 3)
+    # the 3-D panel gets its own wider column so its z label cannot reach the top view's y label
+    gs = fig.add_gridspec(1, 3, width_ratios=(1.15, 1.0, 1.0), wspace=0.08)
+    ax3 = fig.add_subplot(gs[0, 0], projection="3d")
+    ax_top = fig.add_subplot(gs[0, 1])
+    ax_side = fig.add_subplot(gs[0, 2])
     series: list[tuple[np.ndarray, dict]] = []
     if gt is not None:
         series.append((gt[:, :3, 3], _GT_STYLE))
@@ -98,20 +100,33 @@ def plot_trajectories(
         ax_side.plot(xyz[:, 0], xyz[:, 2], **style)
         if len(xyz):
             color = ax_top.lines[-1].get_color()
+            ax3.plot([xyz[0, 0]], [xyz[0, 1]], [xyz[0, 2]], "o", color=color, markersize=4)
             ax_top.plot(xyz[0, 0], xyz[0, 1], "o", color=color, markersize=4)
             ax_side.plot(xyz[0, 0], xyz[0, 2], "o", color=color, markersize=4)
     _equal_3d(ax3, all_xyz)
-    ax3.set_xlabel("x [m]")
-    ax3.set_ylabel("y [m]")
-    ax3.set_zlabel("z [m]")
+    ax3.set_xlabel("x [m]", labelpad=2)
+    ax3.set_ylabel("y [m]", labelpad=2)
+    ax3.set_zlabel("z [m]", labelpad=2)
     ax3.set_title("3-D view")
-    for ax, (a, b), name in ((ax_top, "xy", "top view"), (ax_side, "xz", "side view")):
+    for ax, (a, b), name in ((ax_top, "xy", "top view (x–y)"), (ax_side, "xz", "side view (x–z)")):
         ax.set_xlabel(f"{a} [m]")
         ax.set_ylabel(f"{b} [m]")
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(True, alpha=0.3)
         ax.set_title(name)
-    ax_top.legend(fontsize="small", loc="best")
+    from matplotlib.lines import Line2D
+
+    handles = [ax_top.lines[i] for i in range(0, 2 * len(series), 2)]
+    handles.append(
+        Line2D([], [], marker="o", color="grey", linestyle="none", markersize=5, label="start")
+    )
+    fig.legend(
+        handles=handles,
+        loc="outside lower center",
+        ncol=min(len(handles), 6),
+        fontsize="small",
+        frameon=False,
+    )
     if title:
         fig.suptitle(title)
     return _save(fig, path, dpi)
@@ -125,6 +140,7 @@ def plot_errors(
     times: np.ndarray | None = None,
     title: str | None = None,
     dpi: int = 120,
+    log_scale: bool | None = None,
 ) -> Path:
     """Write a PNG of per-frame errors: ``‖Δ‖``, signed ``Δx, Δy, Δz`` and the rotation error.
 
@@ -145,6 +161,10 @@ def plot_errors(
         Figure title.
     dpi : int
         Resolution.
+    log_scale : bool, optional
+        Logarithmic ‖Δ‖ and rotation axes, and symmetric-log axis errors (linear within the
+        smallest method's range). Default: on when the methods' largest errors differ by more
+        than 20×, so that a method that loses the track does not flatten the others to a line.
 
     Returns
     -------
@@ -170,21 +190,38 @@ def plot_errors(
             raise InputError(f"plot_errors: times must have shape ({len(gt)},), got {x.shape}")
         x = x - x[0] if len(x) else x
         xlabel = "time [s]"
-    fig = Figure(figsize=(9, 10), layout="constrained")
+    errs = {name: pose_errors(poses, gt) for name, poses in est.items()}
+    peaks = [float(e.trans.max(initial=0.0)) for e in errs.values()]
+    if log_scale is None:
+        pos = [p for p in peaks if p > 0]
+        log_scale = len(pos) > 1 and max(pos) > 20 * min(pos)
+    fig = Figure(figsize=(9, 10.5), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(5, 1, sharex=True)
     labels = ["‖Δ‖ [m]", "Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
-    for name, poses in est.items():
-        pe = pose_errors(poses, gt)
+    for name, pe in errs.items():
         curves = [pe.trans, pe.delta[:, 0], pe.delta[:, 1], pe.delta[:, 2], pe.rot_deg]
         for ax, y in zip(axes, curves, strict=True):
-            ax.plot(x, y, linewidth=1.0, label=name)
+            ax.plot(x, y, linewidth=1.2, label=name)
     for ax, lab in zip(axes, labels, strict=True):
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
     for ax in axes[1:4]:
         ax.axhline(0.0, color="black", linewidth=0.6)
+    if log_scale:
+        for ax in (axes[0], axes[4]):
+            ax.set_yscale("log", nonpositive="mask")
+        lin = max(min(p for p in peaks if p > 0), 1e-6)
+        for ax in axes[1:4]:
+            ax.set_yscale("symlog", linthresh=lin)
     axes[-1].set_xlabel(xlabel)
-    axes[0].legend(fontsize="small", loc="best")
-    fig.suptitle(title or "Error with respect to the ground truth")
+    fig.legend(
+        *axes[0].get_legend_handles_labels(),
+        loc="outside lower center",
+        ncol=min(len(est), 4),
+        fontsize="small",
+        frameon=False,
+    )
+    scale_note = " (log scales)" if log_scale else ""
+    fig.suptitle((title or "Error with respect to the ground truth") + scale_note)
     return _save(fig, path, dpi)

@@ -611,6 +611,13 @@ def _section_appendix(ctx: _Ctx) -> None:
             ctx.md += [f"![{fig.stem}](figures/{fig.name})", ""]
 
 
+_MAX_COMPETITOR_LINES = 5
+
+
+def _nan_last(v: float) -> float:
+    return v if v is not None and math.isfinite(v) else math.inf
+
+
 def _scenario_figures(ctx: _Ctx, scn: str) -> list[Path]:
     from relnav.eval.metrics import pose_errors
     from relnav.eval.report_plots import plot_axis_errors, plot_trajectory_panels
@@ -641,11 +648,14 @@ def _scenario_figures(ctx: _Ctx, scn: str) -> list[Path]:
         t = _load_traj(ctx, best_all, seed)
         if t is not None:
             traj_c[f"best proposed: {best_all.info.display}"] = t[0][:, :3, 3]
+    # readable at a glance: the best few competitors by e^RT, not every one on top of another
+    shown = sorted(comps, key=lambda a: _nan_last(a.m("e_RT")))[:_MAX_COMPETITOR_LINES]
     for a in comps:
         t = _load_traj(ctx, a, seed)
         if t is not None:
-            traj_c[a.info.label] = t[0][:, :3, 3]
             gt = t[1] if gt is None else gt
+            if a in shown:
+                traj_c[a.info.label] = t[0][:, :3, 3]
     best_c = _best(comps)
     if best_c is not None:
         t = _load_traj(ctx, best_c, seed)
@@ -658,7 +668,9 @@ def _scenario_figures(ctx: _Ctx, scn: str) -> list[Path]:
     if traj_f:
         groups.append(("best combination per filter", traj_f))
     if traj_c:
-        groups.append(("competitors", traj_c))
+        n_more = len(comps) - len(shown)
+        more = f" (best {len(shown)} of {len(comps)} by e^RT)" if n_more > 0 else ""
+        groups.append((f"competitors{more}", traj_c))
     try:
         out.append(
             plot_trajectory_panels(
@@ -1483,7 +1495,8 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
     """
     from relnav.eval.store import ResultsStore
 
-    out = Path(out_dir).resolve()
+    given = Path(out_dir)  # the folder as the user wrote it, for the regenerate hint
+    out = given.resolve()
     if grid is None:
         if not (out / GRID_FILE).is_file():
             raise InputError(f"{out}: no {GRID_FILE}; run `relnav benchmark` into it first")
@@ -1513,8 +1526,8 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
         "",
         "Tables: " + ", ".join(f"`tables/{p.name}`" for p in ctx.tables) + ".",
         "",
-        f"Regenerate with `relnav report {out.name}`; rerun missing jobs with "
-        f"`relnav benchmark <grid.yaml> --out {out.name}` (finished jobs are skipped).",
+        f"Regenerate with `relnav report {given}`; rerun missing jobs with "
+        f"`relnav benchmark <grid.yaml> --out {given}` (finished jobs are skipped).",
         "",
     ]
     report = out / "report.md"

@@ -55,12 +55,39 @@ _TAB20 = [
 ]
 
 
-def _style(i: int) -> dict[str, object]:
-    """Colour, marker and line style of series ``i`` (distinct for the first 40)."""
+_DASHES = ["-", "--", "-.", ":"]
+
+
+def _style(i: int, *, vary: bool = True) -> dict[str, object]:
+    """Colour, line style and width of series ``i``.
+
+    Styles cycle through solid, dashed, dash-dot and dotted, and widths shrink with ``i``, so
+    a series drawn over an identical earlier one (e.g. H∞ and Kalman giving the same track)
+    leaves the earlier one visible around it. With ``vary=False``: only the colour and a
+    solid/dashed style (distinct for the first 40), for plots with markers and own widths.
+    """
+    if not vary:
+        return {
+            "color": _TAB20[i % len(_TAB20)],
+            "linestyle": "-" if (i // len(_TAB20)) % 2 == 0 else "--",
+        }
     return {
         "color": _TAB20[i % len(_TAB20)],
-        "linestyle": "-" if (i // len(_TAB20)) % 2 == 0 else "--",
+        "linestyle": _DASHES[i % len(_DASHES)],
+        "linewidth": max(2.8 - 0.45 * (i % 5), 1.0),
     }
+
+
+def _same_as(series: Mapping[str, np.ndarray]) -> dict[str, str]:
+    """``{label: earlier label}`` for series numerically identical to an earlier one."""
+    out: dict[str, str] = {}
+    items = [(k, np.asarray(v, dtype=np.float64)) for k, v in series.items()]
+    for j, (name, a) in enumerate(items):
+        for prev, b in items[:j]:
+            if prev not in out and a.shape == b.shape and np.allclose(a, b, atol=1e-9, rtol=0):
+                out[name] = prev
+                break
+    return out
 
 
 _GT = {"color": "black", "linestyle": "--", "linewidth": 1.6, "label": "ground truth"}
@@ -132,10 +159,12 @@ def plot_trajectory_panels(
             ax = axes[row, col]
             ax.plot(gt[:, a], gt[:, b], **_GT)
             ax.plot(gt[0, a], gt[0, b], "ko", markersize=5)
+            same = _same_as(est)
             for i, (name, xyz) in enumerate(est.items()):
                 p = np.asarray(xyz, dtype=np.float64)
                 st = _style(i)
-                ax.plot(p[:, a], p[:, b], linewidth=1.2, label=name, **st)
+                label = f"{name} (= {same[name]})" if name in same else name
+                ax.plot(p[:, a], p[:, b], label=label, **st)
                 ax.plot(
                     p[-1, a],
                     p[-1, b],
@@ -202,14 +231,16 @@ def plot_axis_errors(
     fig = _figure(10.0, 8.5)
     axes = fig.subplots(4, 1, sharex=True)
     labels = ["Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
+    same = _same_as({k: np.column_stack([v[0], v[1]]) for k, v in errors.items()})
     for j, (name, (delta, rot)) in enumerate(errors.items()):
         d = np.asarray(delta)
         if d.shape != (len(x), 3) or np.shape(rot) != (len(x),):
             raise InputError(f"plot_axis_errors: {name!r} does not match {len(x)} frames")
         st = _style(j)
+        label = f"{name} (= {same[name]})" if name in same else name
         for i in range(3):
-            axes[i].plot(x, d[:, i], linewidth=1.1, label=name, **st)
-        axes[3].plot(x, rot, linewidth=1.1, label=name, **st)
+            axes[i].plot(x, d[:, i], label=label, **st)
+        axes[3].plot(x, rot, label=label, **st)
     for ax, lab in zip(axes, labels, strict=True):
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
@@ -310,7 +341,7 @@ def plot_time_vs_points(
         if not good:
             continue
         xs, ys = [p[0] for p in good], [p[1] for p in good]
-        st = _style(i)
+        st = _style(i, vary=False)
         if name == name.lower():  # method strings (competitors) dashed, descriptors solid
             st["linestyle"] = "--"
         ax.plot(xs, ys, marker=_MARKERS[i % len(_MARKERS)], linewidth=1.2, label=name, **st)
@@ -429,7 +460,7 @@ def plot_nuisance_curves(
                 linewidth=1.2,
                 capsize=3,
                 label=m,
-                **_style(i),
+                **_style(i, vary=False),
             )
         if logy:
             ax.set_yscale("log")

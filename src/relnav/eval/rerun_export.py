@@ -13,7 +13,7 @@ import numpy as np
 
 from relnav.errors import ConfigError
 
-__all__ = ["export_rrd"]
+__all__ = ["LiveViewer", "export_rrd"]
 
 
 def _rerun():
@@ -40,8 +40,13 @@ def export_rrd(
     estimates: dict[str, np.ndarray] | None = None,
     sensor: str | None = None,
     max_frames: int | None = None,
-) -> Path:
+    live: bool = False,
+) -> Path | None:
     """Write ``seq_dir``'s scans and trajectories to the Rerun recording ``out``.
+
+    With ``live=True`` they are streamed to a spawned Rerun viewer instead; on a machine
+    without a display (or without the viewer) the recording is written to ``out`` as usual.
+    Returns the file written, or ``None`` when streamed to a viewer.
 
     Parameters
     ----------
@@ -55,6 +60,8 @@ def export_rrd(
         Second sensor's name (``scans_<name>/``).
     max_frames : int, optional
         Export only the first frames.
+    live : bool
+        Stream to a viewer (``relnav view SEQ --live``).
     """
     from relnav.geometry.se3 import transform_points
     from relnav.io.sequences import ScanSequence
@@ -66,7 +73,19 @@ def export_rrd(
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rr.init("relnav", spawn=False)
-    rr.save(str(out))
+    streamed = False
+    if live and _has_display():
+        try:
+            rr.spawn()
+            streamed = True
+        except Exception as e:  # no viewer binary
+            import logging
+
+            logging.getLogger(__name__).warning(
+                "cannot spawn the Rerun viewer (%s): writing %s", e, out
+            )
+    if not streamed:
+        rr.save(str(out))
     if gt is not None:
         rr.log("trajectory/ground_truth", rr.LineStrips3D([gt[:n, :3, 3]]), static=True)
     for name, poses in (estimates or {}).items():
@@ -79,4 +98,88 @@ def export_rrd(
             rr.log("sensor", rr.Points3D(gt[k : k + 1, :3, 3], radii=0.05))
         rr.log("scan", rr.Points3D(pts, radii=0.01))
     rr.disconnect()
-    return out
+    return None if streamed else out
+
+
+def _has_display() -> bool:
+    """False on a Linux machine without X11/Wayland (a server, CI)."""
+    import os
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+class LiveViewer:
+    """Stream odometry to the Rerun viewer as frames are computed (``relnav odometry --viz``).
+
+    Each frame logs the scan in the world frame at its *estimated* pose, the estimated
+    trajectory so far and the sensor position; the ground truth (when known) is logged once.
+    With ``rrd`` the stream goes to that file (headless machines; open it later with
+    ``rerun FILE.rrd``); otherwise a viewer is spawned, and when that is impossible (no
+    display, no viewer binary) the stream falls back to ``fallback_rrd``.
+
+    Parameters
+    ----------
+    name : str
+        Recording name.
+    rrd : Path, optional
+        Write to this ``.rrd`` instead of a live viewer.
+    gt_poses : (N, 4, 4) float64, optional
+        Ground truth ``T_world_sensor``.
+    fallback_rrd : Path, optional
+        Where to write when no viewer can be spawned.
+    max_points : int
+        Scans are subsampled (every k-th point) to at most this many points for display.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        rrd: str | Path | None = None,
+        gt_poses: np.ndarray | None = None,
+        fallback_rrd: str | Path | None = None,
+        max_points: int = 20000,
+    ) -> None:
+        import logging
+
+        rr = _rerun()
+        self._rr = rr
+        self.path: Path | None = None
+        rr.init(f"relnav/{name}", spawn=False)
+        headless = not _has_display()
+        if rrd is None and not headless:
+            try:
+                rr.spawn()
+            except Exception as e:  # no viewer binary, no display
+                logging.getLogger(__name__).warning("cannot spawn the Rerun viewer: %s", e)
+                rrd = fallback_rrd
+        elif rrd is None:
+            rrd = fallback_rrd
+        if rrd is not None:
+            self.path = Path(rrd)
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            rr.save(str(self.path))
+        self._max_points = int(max_points)
+        self._track: list[np.ndarray] = []
+        if gt_poses is not None:
+            rr.log("world/ground_truth", rr.LineStrips3D([gt_poses[:, :3, 3]]), static=True)
+
+    def log_frame(self, k: int, points: np.ndarray | None, pose: np.ndarray) -> None:
+        """Log frame ``k``: ``points`` (sensor frame, (N, 3)) at the estimated ``pose``."""
+        from relnav.geometry.se3 import transform_points
+
+        rr = self._rr
+        _set_frame(rr, k)
+        self._track.append(np.asarray(pose)[:3, 3].copy())
+        rr.log("world/estimate", rr.LineStrips3D([np.asarray(self._track)]))
+        rr.log("world/sensor", rr.Points3D(np.asarray(pose)[None, :3, 3], radii=0.05))
+        if points is not None and len(points):
+            step = max(1, len(points) // self._max_points)
+            rr.log("world/scan", rr.Points3D(transform_points(pose, points[::step]), radii=0.01))
+
+    def close(self) -> None:
+        """Flush and disconnect."""
+        self._rr.disconnect()

@@ -21,7 +21,7 @@ import numpy as np
 from relnav.errors import InputError
 from relnav.geometry.rotations import matrix_to_quat, quat_to_matrix
 
-__all__ = ["read_kitti", "read_tum", "write_kitti", "write_tum"]
+__all__ = ["read_kitti", "read_trajectory", "read_tum", "write_kitti", "write_tum"]
 
 logger = logging.getLogger("relnav.io")
 
@@ -179,3 +179,58 @@ def write_kitti(path: str | Path, poses: np.ndarray) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text("".join(" ".join(map(repr, r)) + "\n" for r in rows), encoding="ascii")
     return p
+
+
+def _first_row_width(p: Path) -> int:
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    try:
+        with p.open(encoding="utf-8-sig") as f:
+            for line in f:
+                s = line.strip()
+                if s and not s.startswith("#"):
+                    return len([t for t in _SPLIT.split(s) if t])
+    except UnicodeDecodeError:
+        raise InputError(f"{p}: not a text trajectory file (undecodable bytes)") from None
+    return 0
+
+
+def read_trajectory(path: str | Path) -> tuple[np.ndarray | None, np.ndarray, str]:
+    """Read a TUM or a KITTI trajectory, telling them apart by the numbers per line.
+
+    A KITTI file has no times; they come from a ``times.txt`` in the same folder when it has one
+    time per pose (the KITTI odometry layout, and what ``relnav odometry --format kitti``
+    writes), else they are ``None``.
+
+    Returns
+    -------
+    timestamps : (N,) float64 or None
+        Seconds.
+    poses : (N, 4, 4) float64
+    fmt : {"tum", "kitti"}
+
+    Raises
+    ------
+    InputError
+        Missing file, or lines with neither 8 (TUM) nor 12 (KITTI) numbers.
+    """
+    p = Path(path)
+    width = _first_row_width(p)
+    if width == 12:
+        poses = read_kitti(p)
+        times = None
+        tf = p.parent / "times.txt"
+        if tf.is_file():
+            t, _ = _numeric_rows(tf, 1, "time in seconds")
+            if len(t) == len(poses):
+                times = t[:, 0].copy()
+            else:
+                logger.warning("%s: %d times for %d poses, ignored", tf, len(t), len(poses))
+        return times, poses, "kitti"
+    if width in (8, 0):
+        t, poses = read_tum(p)
+        return t, poses, "tum"
+    raise InputError(
+        f"{p}: {width} numbers per line: expected 8 (TUM: t x y z qx qy qz qw) "
+        "or 12 (KITTI: row-major 3x4 pose)"
+    )
