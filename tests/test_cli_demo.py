@@ -6,7 +6,7 @@ import json
 
 from typer.testing import CliRunner
 
-from relnav.cli.demo import DEMO_METHODS, run_folder_name
+from relnav.cli.demo import DEMO_METHODS, default_methods, run_folder_name
 from relnav.cli.main import app
 
 
@@ -20,7 +20,8 @@ def test_demo_writes_one_folder_per_method_and_a_narrow_table(tmp_path):
         assert (out / name).is_file(), name
     assert not (out / "estimate.tum").exists()  # no anonymous estimate: one folder per method
     metrics = json.loads((out / "metrics.json").read_text())
-    assert set(metrics["methods"]) == set(DEMO_METHODS)
+    assert set(metrics["methods"]) == set(default_methods())
+    assert set(DEMO_METHODS) <= set(metrics["methods"])
     for m, row in metrics["methods"].items():
         assert row["n_frames"] == 6
         assert row["e_RT"] >= 0
@@ -43,5 +44,19 @@ def test_demo_writes_one_folder_per_method_and_a_narrow_table(tmp_path):
     lines = res.output.splitlines()
     assert all(len(line) <= 80 for line in lines), max(lines, key=len)
     assert "…" not in res.output
-    assert "A = feature:hods+gcc+alphabeta" in res.output
+    assert "relnav" in res.output and "paper1" in res.output
     assert "rpe_trans_rmse" in res.output
+
+
+def test_odometry_runs_the_navigator_by_default(tmp_path):
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    seq = tmp_path / "seq"
+    simulate(get_preset("sim-voyager", max_frames=4), seq)
+    out = tmp_path / "run"
+    res = CliRunner().invoke(app, ["odometry", str(seq), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    info = json.loads((out / "run.json").read_text())
+    assert info["method"] == "relnav"
+    assert len((out / "estimate.tum").read_text().splitlines()) == 4

@@ -10,7 +10,20 @@ from relnav.cli._common import console, progress_bar
 
 DEMO_PRESET = "sim-voyager"
 DEMO_FRAMES = 60
-DEMO_METHODS = ("feature:hods+gcc+alphabeta", "feature:hods+gcc+svd", "icp-point", "extended")
+DEMO_METHODS = ("relnav", "paper1", "extended", "icp-point")
+"""relnav's navigator, paper 1's pipeline as published, its extended HoD-S, plain ICP."""
+DEMO_PEER = "kiss-icp"
+"""The best peer of the navigation suite, added to the demo when ``[baselines]`` is installed."""
+
+
+def default_methods() -> list[str]:
+    """:data:`DEMO_METHODS`, plus :data:`DEMO_PEER` when its package is importable."""
+    import importlib.util
+
+    peer = [DEMO_PEER] if importlib.util.find_spec("kiss_icp") is not None else []
+    return [*DEMO_METHODS, *peer]
+
+
 TABLE_KEYS = (
     ("e_T_avg", "m"),
     ("e_T_max", "m"),
@@ -51,11 +64,11 @@ def demo(
     ),
     seed: int = typer.Option(0, "--seed", help="Simulation seed."),
     method: list[str] = typer.Option(
-        list(DEMO_METHODS),
+        None,
         "--method",
         "-m",
-        help="Methods or presets to compare (`relnav methods`); 'extended' = HoD-S with "
-        "relnav's extensions.",
+        help="Methods or presets to compare (`relnav methods`); default: relnav, paper1, "
+        "extended, icp-point, and kiss-icp when [baselines] is installed.",
     ),
 ) -> None:
     """Run the whole chain on a built-in scenario (procedural target, ~60 frames).
@@ -80,6 +93,7 @@ def demo(
     from relnav.sim.presets import get_preset
     from relnav.sim.scenario import simulate
 
+    method = list(method) if method else default_methods()
     resolved = {m: resolve_method(m) for m in method}  # unknown names fail before any work
     labels = short_labels(list(method))
     out.mkdir(parents=True, exist_ok=True)

@@ -31,6 +31,13 @@ def methods() -> None:
     t = Table(title="registration methods (use with `relnav odometry --method`)")
     for col in ("method", "description", "available"):
         t.add_column(col)
+    t.add_row(
+        "relnav",
+        "relnav's own navigator (the default): frame-to-model robust GICP on a voxel map of the "
+        "target, constant-velocity filter of pose and velocity as the prior, flags from "
+        "overlap, degeneracy and motion consistency",
+        "yes",
+    )
     for meta in available_methods().values():
         ok = _extra_available(meta["extra"])
         hint = escape(f"needs pip install 'relnav[{meta['extra']}]'")

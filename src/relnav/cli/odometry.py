@@ -25,11 +25,11 @@ def prepare_method(method: str, option: list[str] | None) -> tuple[str, dict[str
     Returns ``(method string, options, preset name or None)``; raises
     :class:`~relnav.errors.ConfigError` (with "did you mean") for an unknown name or bad options.
     """
-    from relnav.odometry import Odometry
     from relnav.odometry.presets import resolve_method
+    from relnav.odometry.runner import make_tracker
 
     name, opts, preset = resolve_method(method, parse_options(option))
-    Odometry(name, **opts)  # builds the registration: bad options fail here, not after frame 0
+    make_tracker(name, **opts)  # builds the method: bad options fail here, not after frame 0
     return name, opts, preset
 
 
@@ -120,7 +120,7 @@ def odometry(
         "recording (.bag, .mcap, .db3, ROS 2 bag folder).",
     ),
     method: str = typer.Option(
-        "feature:hods+gcc+alphabeta",
+        "relnav",
         "--method",
         "-m",
         help="Method string or preset name (`relnav methods` lists both).",

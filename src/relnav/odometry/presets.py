@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from relnav.errors import ConfigError
+from relnav.odometry.runner import NAVIGATOR_METHOD
 
 __all__ = ["METHOD_PRESETS", "MethodPreset", "method_label", "resolve_method"]
 
@@ -81,7 +82,7 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 def _known_names() -> list[str]:
     from relnav.registration import available_methods
 
-    names = list(METHOD_PRESETS)
+    names = [NAVIGATOR_METHOD, *METHOD_PRESETS]
     for prefix, meta in available_methods().items():
         names.append(prefix)
         names.extend(meta["examples"])
@@ -122,6 +123,8 @@ def resolve_method(
         p = METHOD_PRESETS[key]
         return p.method, _merge(p.options, opts), key
     prefix = key.partition(":")[0].strip().lower()
+    if key.lower() == NAVIGATOR_METHOD:
+        return NAVIGATOR_METHOD, opts, None
     if prefix not in available_methods():
         close = difflib.get_close_matches(key.lower(), _known_names(), n=3, cutoff=0.6)
         if not close:
