@@ -93,6 +93,17 @@ class ConstantVelocityFilter:
         self._pred = (T_pred, 0.5 * (P + P.T), float(t))
         return T_pred.copy(), self._pred[1][:6, :6].copy()
 
+    def widen(self, sigma_pose: np.ndarray) -> None:
+        """Add ``sigma_pose²`` (body frame, 6) to the predicted pose covariance, and the same
+        per frame period to the velocity's: the model was found wrong, trust the next scans."""
+        assert self._pred is not None, "predict() first"
+        T_pred, P, t = self._pred
+        dt = max(t - self.t, 1e-9)
+        P = P.copy()
+        P[:6, :6] += np.diag(np.asarray(sigma_pose, dtype=float) ** 2)
+        P[6:, 6:] += np.diag((np.asarray(sigma_pose, dtype=float) / dt) ** 2)
+        self._pred = (T_pred, P, t)
+
     def update(self, T_star: np.ndarray, H_left: np.ndarray) -> None:
         """Accept the registered pose ``T*`` with the scan's information ``H`` (left, target)."""
         assert self._pred is not None, "predict() first"

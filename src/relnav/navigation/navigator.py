@@ -77,6 +77,10 @@ class NavigatorConfig:
     chi2_gate : float
         Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
         ``ok`` step.
+    recover_rms_ratio : float
+        A step inconsistent with the motion model is registered again under the first frame's
+        weak prior and accepted if its robust residual is at most this times the first one's
+        (the model, not the scan, was wrong: a manoeuvre or an over-confident velocity).
     adaptive_noise : bool
         Scale the motion model's process noise by its recent normalised corrections.
     min_degeneracy : float
@@ -107,6 +111,7 @@ class NavigatorConfig:
     max_points: int = 400
     min_overlap: float = 0.3
     chi2_gate: float = 100.0
+    recover_rms_ratio: float = 1.5
     adaptive_noise: bool = True
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
@@ -192,6 +197,9 @@ class Navigator:
                 T_target_source=T_pred, status="failed", message=f"{type(e).__name__}: {e}"
             )
         if result.status == "ok":
+            if result.info.get("recovered"):
+                st, sr = self._first_sigma
+                self.motion.widen(np.array([st] * 3 + [sr] * 3))
             self.motion.update(result.T_target_source, result.info.pop("_H"))
             if self.config.adaptive_noise:
                 self.motion.adapt(result.info["chi2_motion"])
@@ -256,6 +264,7 @@ class Navigator:
             np.array([sa_t] * 3 + [sa_r] * 3),
         )
         self._rescaled = False
+        self._first_sigma = (st0, sr0)
         return OdometryStep(
             self.pose.copy(),
             np.eye(4),
@@ -281,7 +290,6 @@ class Navigator:
                 info=info,
             )
         ts = time.perf_counter()
-        radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), self.spacing0)
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
         Ad = adjoint(T_pred)
@@ -291,16 +299,105 @@ class Navigator:
         v = self.map.voxel_size
         motion = 3.0 * (float(np.linalg.norm(sigma[:3])) + float(np.linalg.norm(sigma[3:])) * rng)
         gate = float(max(motion, 2.0 * v))
-        M = self.map.means
-        Om = self.map.information
-        trees = self.map.search_trees
         timings["prepare"] = time.perf_counter() - ts
         ts = time.perf_counter()
+        fit = self._solve(P, T_pred, Lam, gate, rng)
+        recovered = False
+        if fit["chi2"] > c.chi2_gate and fit["usable"]:
+            # the model and the scan disagree: is the model wrong (a manoeuvre, an
+            # over-confident velocity) or the registration? Register again under the first
+            # frame's weak prior; keep that answer only if the scan supports it as well.
+            weak = self._weak_prior(T_pred)
+            gate_w = float(max(gate, 3.0 * self._first_sigma[0]))
+            alt = self._solve(P, T_pred, weak, gate_w, rng)
+            if (
+                alt["usable"]
+                and alt["cond"] >= c.min_degeneracy
+                and (alt["rms"] <= c.recover_rms_ratio * fit["rms"])
+            ):
+                fit, recovered = alt, True
+                Lam = weak
+        timings["register"] = time.perf_counter() - ts
+        T, H = fit["T"], fit["H"]
+        info["_H"] = H / fit["var_factor"]
+        info.update(
+            iterations=fit["iterations"],
+            overlap=fit["overlap"],
+            chi2_motion=fit["chi2"],
+            degeneracy=fit["cond"],
+            gate=gate,
+            sigma_t=float(sigma[0]),
+            sigma_r_deg=float(math.degrees(sigma[3])),
+            map_voxels=len(self.map),
+            robust_rms_sigma=fit["rms"],
+            variance_factor=fit["var_factor"],
+            recovered=recovered,
+        )
+        status = "ok"
+        message = ""
+        if not (np.all(np.isfinite(T)) and np.all(np.isfinite(H))):
+            status, message = "failed", "non-finite registration"
+        elif fit["n_pairs"] < c.min_points:
+            status, message = (
+                "failed",
+                f"{fit['n_pairs']} scan points near the model (< {c.min_points})",
+            )
+        elif fit["overlap"] < c.min_overlap:
+            status, message = (
+                "failed",
+                f"overlap {fit['overlap']:.2f} with the model (< {c.min_overlap})",
+            )
+        elif fit["cond"] < c.min_degeneracy:
+            status, message = (
+                "degenerate",
+                f"the scan constrains too few directions (eigenvalue ratio {fit['cond']:.1e})",
+            )
+        elif fit["chi2"] > c.chi2_gate and not recovered:
+            status, message = (
+                "failed",
+                f"correction inconsistent with the motion model (χ² {fit['chi2']:.1f} > "
+                f"{c.chi2_gate}) and not confirmed under a weak prior",
+            )
+        cov = None
+        try:
+            cov = np.linalg.inv(H / fit["var_factor"] + Lam)
+        except np.linalg.LinAlgError:
+            cov = None
+        return RegistrationResult(
+            T_target_source=T,
+            covariance=cov,
+            fitness=fit["fitness"],
+            inlier_rmse=fit["rms"],
+            n_correspondences=int(fit["n_pairs"]),
+            n_inliers=int(fit["n_inliers"]),
+            converged=fit["iterations"] < c.max_iter,
+            status=status,  # type: ignore[arg-type]
+            timings=timings,
+            message=message,
+            info=info,
+        )
+
+    def _weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
+        """Information (left, target frame) of the first frame's weak motion prior."""
+        st, sr = self._first_sigma
+        Sb = np.diag([st**2] * 3 + [sr**2] * 3)
+        Ad = adjoint(T_pred)
+        S = Ad @ Sb @ Ad.T
+        L = np.linalg.pinv(0.5 * (S + S.T))
+        return 0.5 * (L + L.T)
+
+    def _solve(
+        self, P: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray, gate: float, rng: float
+    ) -> dict[str, Any]:
+        """One registration onto the map and its quality figures."""
+        c = self.config
+        assert self.map is not None
+        v = self.map.voxel_size
         fit = solve_scan_to_map(
             P,
-            trees,
-            M,
-            Om,
+            self.map.search_trees,
+            self.map.means,
+            self.map.information,
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(Lam),
@@ -310,70 +407,32 @@ class Navigator:
             1e-4 * v,
             1e-4 * v / max(rng, 1.0),
         )
-        timings["register"] = time.perf_counter() - ts
-        T, H, n_pairs, iters, d2 = fit.T, fit.H, fit.n_pairs, fit.iterations, fit.d2
-        sw, swd = fit.sw, fit.swd
         n = len(P)
-        has = d2 >= 0
-        inl = has & (d2 < 9.0)
-        overlap = float(has.sum()) / n
-        fitness = float(inl.sum()) / n
-        xi = log_se3(T @ invert(T_pred))
-        chi2 = float(xi @ Lam @ xi)
-        info["_H"] = H
+        has = fit.d2 >= 0
+        inl = has & (fit.d2 < 9.0)
+        xi = log_se3(fit.T @ invert(T_pred))
+        radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), self.spacing0)
         # degeneracy: eigenvalues of H with rotations scaled by the lever arm
-        Sc = np.diag([1.0, 1.0, 1.0, radius, radius, radius])
-        Hs = np.linalg.inv(Sc) @ H @ np.linalg.inv(Sc)
+        sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
+        Hs = fit.H * sc[:, None] * sc[None, :]
         ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
-        cond = float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
-        robust_rms = float(math.sqrt(swd / sw)) if sw > 0 else float("nan")
-        info.update(
-            iterations=int(iters),
-            overlap=overlap,
-            chi2_motion=chi2,
-            degeneracy=cond,
-            gate=gate,
-            sigma_t=float(sigma[0]),
-            sigma_r_deg=float(math.degrees(sigma[3])),
-            map_voxels=len(self.map),
-            robust_rms_sigma=robust_rms,
-        )
-        status = "ok"
-        message = ""
-        if not (np.all(np.isfinite(T)) and np.all(np.isfinite(H))):
-            status, message = "failed", "non-finite registration"
-        elif n_pairs < c.min_points:
-            status, message = "failed", f"{n_pairs} scan points near the model (< {c.min_points})"
-        elif overlap < c.min_overlap:
-            status, message = "failed", f"overlap {overlap:.2f} with the model (< {c.min_overlap})"
-        elif cond < c.min_degeneracy:
-            status, message = (
-                "degenerate",
-                f"the scan constrains too few directions (eigenvalue ratio {cond:.1e})",
-            )
-        elif chi2 > c.chi2_gate:
-            status, message = (
-                "failed",
-                f"correction inconsistent with the motion model (χ² {chi2:.1f} > {c.chi2_gate})",
-            )
-        cov = None
-        try:
-            cov = np.linalg.inv(H + Lam)
-        except np.linalg.LinAlgError:
-            cov = None
-        return RegistrationResult(
-            T_target_source=T,
-            covariance=cov,
-            fitness=fitness,
-            inlier_rmse=robust_rms,
-            n_correspondences=int(n_pairs),
-            n_inliers=int(inl.sum()),
-            converged=iters < c.max_iter,
-            status=status,  # type: ignore[arg-type]
-            timings=timings,
-            message=message,
-            info=info,
-        )
+        rms = float(math.sqrt(fit.swd / fit.sw)) if fit.sw > 0 else float("nan")
+        return {
+            "T": fit.T,
+            "H": fit.H,
+            "n_pairs": fit.n_pairs,
+            "iterations": fit.iterations,
+            "overlap": float(has.sum()) / n,
+            "fitness": float(inl.sum()) / n,
+            "n_inliers": int(inl.sum()),
+            "chi2": float(xi @ Lam @ xi),
+            "cond": float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0,
+            "rms": rms,
+            # [interpretation] residuals larger than the map's noise model (resampled
+            # surfaces, map blur) scale the information down: σ̂² = mean weighted d² ≥ 1
+            "var_factor": max(1.0, rms**2) if np.isfinite(rms) else 1.0,
+            "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
+        }
 
     def config_dict(self) -> dict[str, Any]:
         """The options in use."""

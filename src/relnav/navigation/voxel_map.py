@@ -20,8 +20,6 @@ The map is bounded: above ``max_voxels`` the least recently seen voxels are drop
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
