@@ -33,6 +33,37 @@ def prepare_method(method: str, option: list[str] | None) -> tuple[str, dict[str
     return name, opts, preset
 
 
+def write_state_outputs(out: Path, run: Any, gt: Any, metrics: dict[str, Any]) -> list[str]:
+    """The navigator's full relative state (twistor UKF on its poses): ``state.csv``,
+    ``state.png`` and, with ground truth, ``state_errors.png`` (errors with ±3σ); adds the
+    state's error summary and NEES to ``metrics`` (key ``state``)."""
+    import numpy as np
+
+    from relnav.cli.track import plot_track, plot_track_errors
+    from relnav.navigation.state import nees_band, relative_state
+
+    result = relative_state(run, gt_poses=gt)
+    result.to_csv(out / "state.csv")
+    names = ["state.csv", plot_track(result, out / "state.png").name]
+    if gt is not None:
+        names.append(plot_track_errors(result, out / "state_errors.png").name)
+        k0 = round(0.3 * len(result))
+        nees = result.nees()[k0:]
+        nees = nees[np.isfinite(nees)]
+        summary = result.summary(skip=0.3)
+        metrics["state"] = {
+            "skip_fraction": 0.3,
+            "omega_rms_deg_s": summary["omega"]["rms"],
+            "omega_max_deg_s": summary["omega"]["max"],
+            "attitude_rms_deg": summary["attitude"]["rms"],
+            "position_rms_m": summary["position"]["rms"],
+            "velocity_rms_m_s": summary["velocity"]["rms"],
+            "nees_mean": float(np.mean(nees)) if len(nees) else None,
+            "nees_band_95": list(nees_band(len(nees))) if len(nees) else None,
+        }
+    return names
+
+
 def write_run_outputs(
     out: Path,
     run: Any,
@@ -97,6 +128,12 @@ def write_run_outputs(
                 title=f"{label}: error with respect to the ground truth",
             )
             outputs.append("errors.png")
+    if run.method == "relnav" and len(run.steps) >= 3:
+        outputs += write_state_outputs(out, run, gt[:n] if gt is not None else None, metrics)
+        if metrics:
+            from relnav.cli.evaluate import json_safe
+
+            (out / "metrics.json").write_text(json.dumps(json_safe(metrics), indent=2) + "\n")
     if seed is None:  # a simulated sequence records its scenario's seed
         scenario = getattr(seq, "scenario", None)
         seed = scenario.get("seed") if isinstance(scenario, dict) else None

@@ -200,7 +200,7 @@ class Navigator:
             if result.info.get("recovered"):
                 st, sr = self._first_sigma
                 self.motion.widen(np.array([st] * 3 + [sr] * 3))
-            self.motion.update(result.T_target_source, result.info.pop("_H"))
+            self.motion.update(result.T_target_source, result.info["information"])
             if self.config.adaptive_noise:
                 self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
@@ -208,7 +208,6 @@ class Navigator:
             self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             timings["map"] = time.perf_counter() - ts
         else:
-            result.info.pop("_H", None)
             self.motion.skip()
             self.pose = self.motion.pose.copy()
         step = invert(prev_pose) @ self.pose
@@ -319,7 +318,7 @@ class Navigator:
                 Lam = weak
         timings["register"] = time.perf_counter() - ts
         T, H = fit["T"], fit["H"]
-        info["_H"] = H / fit["var_factor"]
+        info["information"] = H / fit["var_factor"]
         info.update(
             iterations=fit["iterations"],
             overlap=fit["overlap"],
