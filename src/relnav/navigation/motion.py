@@ -64,6 +64,10 @@ class ConstantVelocityFilter:
         self._pred: tuple[np.ndarray, np.ndarray, float] | None = None
         self.q_scale = 1.0
         self.nis_ema: float | None = None
+        self.lag = 0
+        self._hist: list[dict[str, np.ndarray]] = []
+        self.smoothed: list[np.ndarray] = []
+        self._F: np.ndarray | None = None
 
     def adapt(self, chi2: float, dof: int = 6, rate: float = 0.1, max_scale: float = 100.0) -> None:
         """Scale the process noise by the recent normalised innovation (``χ²/dof``, EMA).
@@ -90,7 +94,9 @@ class ConstantVelocityFilter:
         Q[:6, :6] = np.diag(sa2 * dt**2) / 3.0
         P = F @ self.P @ F.T + Q
         T_pred = self.pose @ step
+        self._v_pred = self.velocity.copy()
         self._pred = (T_pred, 0.5 * (P + P.T), float(t))
+        self._F = F
         return T_pred.copy(), self._pred[1][:6, :6].copy()
 
     def widen(self, sigma_pose: np.ndarray) -> None:
@@ -117,10 +123,12 @@ class ConstantVelocityFilter:
             G = H @ np.linalg.inv(Ppp @ H + np.eye(6))
         except np.linalg.LinAlgError:
             G = np.zeros((6, 6))
+        P_prior = P
         P = P - P[:, :6] @ G @ P[:6, :]
         self.P = 0.5 * (P + P.T)
         self.pose = np.array(T_star, dtype=np.float64)
         self.t = t
+        self._record(T_pred, P_prior)
         self._pred = None
 
     def skip(self) -> None:
@@ -128,4 +136,56 @@ class ConstantVelocityFilter:
         assert self._pred is not None, "predict() first"
         T_pred, P, t = self._pred
         self.pose, self.P, self.t = T_pred, P, t
+        self._record(T_pred, P)
         self._pred = None
+
+    # ------------------------------------------------------------------ fixed-lag smoothing
+    def start_smoothing(self, lag: int) -> None:
+        """Keep the last ``lag`` frames and smooth each one when it leaves the window
+        (Rauch–Tung–Striebel on the error state); ``lag=0`` turns smoothing off."""
+        self.lag = int(lag)
+        self._hist = [{"T": self.pose.copy(), "v": self.velocity.copy(), "P": self.P.copy()}]
+
+    def _record(self, T_pred: np.ndarray, P_pred: np.ndarray) -> None:
+        if self.lag <= 0:
+            return
+        self._hist.append(
+            {
+                "T": self.pose.copy(),
+                "v": self.velocity.copy(),
+                "P": self.P.copy(),
+                "T_pred": T_pred,
+                "v_pred": self._v_pred,
+                "P_pred": P_pred,
+                "F": self._F,
+            }
+        )
+        if len(self._hist) > self.lag + 1:
+            self.smoothed.append(self._smooth_window()[0])
+            del self._hist[0]
+
+    def _smooth_window(self) -> list[np.ndarray]:
+        """RTS backward pass over the window; smoothed poses, oldest first."""
+        h = self._hist
+        Ts, vs, Ps = h[-1]["T"], h[-1]["v"], h[-1]["P"]
+        out = [Ts]
+        for k in range(len(h) - 2, -1, -1):
+            nxt = h[k + 1]
+            try:
+                C = h[k]["P"] @ nxt["F"].T @ np.linalg.inv(nxt["P_pred"])
+            except np.linalg.LinAlgError:
+                C = np.zeros((12, 12))
+            d = np.concatenate([log_se3(invert(nxt["T_pred"]) @ Ts), vs - nxt["v_pred"]])
+            corr = C @ d
+            Ts = h[k]["T"] @ exp_se3(corr[:6])
+            vs = h[k]["v"] + corr[6:]
+            Ps = h[k]["P"] + C @ (Ps - nxt["P_pred"]) @ C.T
+            out.append(Ts)
+        return out[::-1]
+
+    def finish_smoothing(self) -> list[np.ndarray]:
+        """Smoothed poses of every frame still in the window; returns all smoothed poses."""
+        if self.lag > 0 and self._hist:
+            self.smoothed.extend(self._smooth_window())
+            self._hist = []
+        return self.smoothed

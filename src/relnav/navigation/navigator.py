@@ -81,6 +81,9 @@ class NavigatorConfig:
         A step inconsistent with the motion model is registered again under the first frame's
         weak prior and accepted if its robust residual is at most this times the first one's
         (the model, not the scan, was wrong: a manoeuvre or an over-confident velocity).
+    smooth_lag : int
+        Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
+        (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
     adaptive_noise : bool
         Scale the motion model's process noise by its recent normalised corrections.
     min_degeneracy : float
@@ -113,6 +116,7 @@ class NavigatorConfig:
     chi2_gate: float = 100.0
     recover_rms_ratio: float = 1.5
     adaptive_noise: bool = True
+    smooth_lag: int = 20
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -158,6 +162,9 @@ class Navigator:
         self.motion: ConstantVelocityFilter | None = None
         self.spacing0 = float("nan")
         self.n_frames = 0
+        self._online: list[np.ndarray] = []
+        self._f0 = 0
+        self._rescaled = False
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -178,6 +185,7 @@ class Navigator:
         if self.map is None:  # first usable frame builds the map
             out = self._first(P, t, n_raw, t_start)
             self.n_frames += 1
+            self._online.append(out.pose.copy())
             return out
 
         assert self.motion is not None
@@ -188,6 +196,7 @@ class Navigator:
                 self.motion.P[6:, 6:] /= dt**2
                 self.motion.sigma_acc = self.motion.sigma_acc / dt
             self._rescaled = True
+            self.motion.start_smoothing(self.config.smooth_lag)
         T_pred, P_pp = self.motion.predict(t)
         try:
             result = self._register(P, T_pred, P_pp, timings)
@@ -212,6 +221,7 @@ class Navigator:
             self.pose = self.motion.pose.copy()
         step = invert(prev_pose) @ self.pose
         self.n_frames += 1
+        self._online.append(self.pose.copy())
         return OdometryStep(
             self.pose.copy(),
             step,
@@ -263,6 +273,7 @@ class Navigator:
             np.array([sa_t] * 3 + [sa_r] * 3),
         )
         self._rescaled = False
+        self._f0 = self.n_frames
         self._first_sigma = (st0, sr0)
         return OdometryStep(
             self.pose.copy(),
@@ -432,6 +443,22 @@ class Navigator:
             "var_factor": max(1.0, rms**2) if np.isfinite(rms) else 1.0,
             "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
         }
+
+    def finalize(self) -> np.ndarray:
+        """Poses of every frame so far, smoothed when ``smooth_lag > 0``: ``(N, 4, 4)``.
+
+        Frames before the map started keep their pose; each later frame's pose is the
+        fixed-lag smoother's (it used up to ``smooth_lag`` later frames).
+        """
+        online = list(self._online)
+        if self.motion is None or self.config.smooth_lag <= 0 or not self._rescaled:
+            return np.stack(online) if online else np.zeros((0, 4, 4))
+        sm = self.motion.finish_smoothing()
+        poses = online[: self._f0] + list(sm)
+        if len(poses) != len(online):  # defensive: never return a trajectory of another length
+            log.warning("smoother returned %d poses for %d frames", len(poses), len(online))
+            return np.stack(online)
+        return np.stack(poses)
 
     def config_dict(self) -> dict[str, Any]:
         """The options in use."""
