@@ -37,6 +37,8 @@ class OdometryRun:
     poses : (N, 4, 4) float64
         Estimated ``T_world_sensor`` (world = the ground truth's frame when the run started
         from the ground truth's first pose, i.e. the target frame for simulated sequences).
+        Methods with a smoother (``relnav``) give their smoothed trajectory here; the online
+        per-frame poses stay in ``steps[k].pose``.
     steps : list[OdometryStep]
         Per-frame details.
     options : dict
@@ -188,6 +190,11 @@ def run_sequence(
             if progress is not None:
                 progress(i, step)
     poses = np.stack([s.pose for s in steps]) if steps else np.zeros((0, 4, 4))
+    finalize = getattr(odo, "finalize", None)
+    if callable(finalize) and steps:  # e.g. the navigator's fixed-lag smoother
+        smoothed = np.asarray(finalize(), dtype=float)
+        if smoothed.shape == poses.shape and np.all(np.isfinite(smoothed)):
+            poses = smoothed
     name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
     run = OdometryRun(
         name,
