@@ -131,6 +131,40 @@ def _read_timestamps(p: Path) -> np.ndarray:
     return np.asarray(vals, dtype=np.float64)
 
 
+def _check_increasing(t: np.ndarray, source: Path) -> None:
+    """InputError naming the first scan time that is not after the previous one."""
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        kind = "duplicate" if t[k] == t[k - 1] else "decreasing"
+        raise InputError(
+            f"{source}: scan times must increase: {kind} time {t[k]!r} s at scan {k} "
+            f"(previous {t[k - 1]!r} s; {bad.size} such scans)"
+        )
+
+
+def _warn_ignored(d: Path, n: int) -> None:
+    """Warn about files of ``d`` that are not scans (unsupported extensions) or no scans."""
+    other = sorted(
+        q.suffix.lower() or q.name
+        for q in d.iterdir()
+        if q.is_file()
+        and q.suffix.lower() not in POINT_READ_EXTENSIONS
+        and not q.name.startswith(".")
+    )
+    if other:
+        kinds = ", ".join(sorted(set(other)))
+        logger.warning(
+            "%s: ignoring %d files that are not scans (%s); scan extensions: %s",
+            d,
+            len(other),
+            kinds,
+            " ".join(POINT_READ_EXTENSIONS),
+        )
+    if n == 0:
+        logger.warning("%s: no scan files found", d)
+
+
 def _to_builtin(x: Any) -> Any:
     """Recursively turn NumPy scalars/arrays, tuples and Paths into YAML-safe builtins."""
     if isinstance(x, dict):
@@ -180,8 +214,7 @@ class ScanSequence:
             raise InputError(f"{lay.scans_dir}: missing scans folder{hint}")
         self._files = _scan_files(lay.scans_dir)
         n = len(self._files)
-        if n == 0:
-            logger.warning("%s: no scan files found", lay.scans_dir)
+        _warn_ignored(lay.scans_dir, n)
         self._meta = _read_yaml(lay.sensor_yaml) if lay.sensor_yaml.is_file() else {}
         self._gt: np.ndarray | None = None
         self._gt_loaded = False
@@ -192,6 +225,7 @@ class ScanSequence:
                 raise InputError(
                     f"{lay.timestamps}: {t.shape[0]} timestamps for {n} scans in {lay.scans_dir}"
                 )
+            _check_increasing(t, lay.timestamps)
             self._times = t
         self._times_from_file = self._times is not None
 
@@ -233,6 +267,7 @@ class ScanSequence:
                     logger.warning("ignoring ground-truth times: %s", e)
                 else:
                     if t.shape[0] == n:
+                        _check_increasing(t, self._layout.gt)
                         times = t
             self._times = times
             self._times_from_file = False
