@@ -38,7 +38,7 @@ def atomic_open(path: str | Path, mode: str = "w", **kwargs: object) -> Iterator
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_name(p)
-    f = open(tmp, mode, **kwargs)  # noqa: SIM115 - closed below in both branches
+    f = open(tmp, mode, **kwargs)
     try:
         yield f
         f.flush()

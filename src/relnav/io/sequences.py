@@ -401,7 +401,7 @@ class SequenceWriter:
             if old and not overwrite:
                 raise InputError(
                     f"{lay.scans_dir}: already holds {len(old)} scan files "
-                    "(pass overwrite=True to replace them)"
+                    "(pass overwrite=True, or --overwrite on the command line, to replace them)"
                 )
             for q in old:
                 q.unlink()
