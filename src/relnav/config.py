@@ -46,10 +46,12 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
 
 def dump_yaml(data: dict[str, Any], path: str | Path | None = None) -> str:
-    """YAML text of ``data`` (keys in insertion order); also written to ``path`` if given."""
+    """YAML text of ``data`` (keys in insertion order); also written (atomically) to ``path``."""
     text = yaml.safe_dump(data, sort_keys=False)
     if path is not None:
-        Path(path).write_text(text)
+        from relnav.io.atomic import atomic_write_text  # lazy: relnav.io imports this module
+
+        atomic_write_text(path, text)
     return text
 
 
