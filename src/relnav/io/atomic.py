@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["atomic_open", "atomic_write_text", "temp_name"]
+__all__ = ["atomic_open", "atomic_write_text", "remove_stale_temps", "temp_name"]
 
 
 def temp_name(path: str | Path) -> Path:
@@ -56,3 +56,29 @@ def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8") -> P
     with atomic_open(path, "w", encoding=encoding) as f:
         f.write(text)
     return Path(path)
+
+
+def remove_stale_temps(path: str | Path) -> int:
+    """Delete temporary siblings of ``path`` left by processes that no longer run (killed
+    mid-write); returns how many were removed."""
+    p = Path(path)
+    n = 0
+    for tmp in p.parent.glob(f".{p.name}.*.tmp"):
+        pid_text = tmp.name[len(p.name) + 2 : -len(".tmp")]
+        if not pid_text.isdigit() or _alive(int(pid_text)):
+            continue
+        tmp.unlink(missing_ok=True)
+        n += 1
+    return n
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True

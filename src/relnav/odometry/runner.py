@@ -160,7 +160,7 @@ class _RunWriter:
     no file a later run trusts)."""
 
     def __init__(self, out_dir: str | Path) -> None:
-        from relnav.io.atomic import temp_name
+        from relnav.io.atomic import remove_stale_temps, temp_name
 
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
@@ -168,6 +168,8 @@ class _RunWriter:
             "estimate": self.out / "estimate.tum",
             "diagnostics": self.out / "diagnostics.csv",
         }
+        for p in self.paths.values():
+            remove_stale_temps(p)
         self._tmp = {k: temp_name(p) for k, p in self.paths.items()}
         self._est = self._tmp["estimate"].open("w", encoding="ascii")
         self._diag = self._tmp["diagnostics"].open("w", newline="")
