@@ -668,6 +668,7 @@ def simulate(
         Invalid scenario, missing mesh, existing output; a sensor that saw nothing of the
         target in any frame (:class:`InputError`).
     """
+    from relnav.io.atomic import atomic_write_text
     from relnav.io.sequences import SequenceWriter
     from relnav.sim.targets import get_target
 
@@ -748,7 +749,7 @@ def simulate(
         tw = time.perf_counter()
         for w in writers:
             w.close()
-        (out / "scenario.yaml").write_text(scenario_yaml(resolved), encoding="utf-8")
+        atomic_write_text(out / "scenario.yaml", scenario_yaml(resolved))
         timings["write"] += time.perf_counter() - tw
     finally:
         for w in writers:
