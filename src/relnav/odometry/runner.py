@@ -292,10 +292,11 @@ def run_sequence(
                 try:
                     scan = sequence[i]
                 except InputError as e:
-                    if strict:
+                    skip = getattr(odo, "skip_frame", None)  # any odometry offering it
+                    if strict or skip is None:
                         raise
                     times[i] = _scan_time(sequence, i, times[i - 1] if i else 0.0)
-                    step = odo.skip_frame(f"unreadable scan: {e}")
+                    step = skip(f"unreadable scan: {e}")
                 else:
                     times[i] = scan.time if isinstance(scan, Scan) else float(i)
                     step = odo.register_frame(scan)

@@ -17,7 +17,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from relnav.config import check_options
+from relnav.config import check_options, did_you_mean
 from relnav.errors import ConfigError
 from relnav.registration.result import RegistrationResult
 
@@ -101,8 +101,8 @@ def get_registration(method: str, **options: Any) -> Registration:
     prefix = prefix.strip().lower()
     if prefix not in _REGISTRY:
         raise ConfigError(
-            f"unknown method {method!r}; families: {', '.join(sorted(_REGISTRY))} "
-            "(see `relnav methods`)"
+            f"unknown method {method!r}{did_you_mean(prefix, _REGISTRY)}; families: "
+            f"{', '.join(sorted(_REGISTRY))} (see `relnav methods`)"
         )
     if sep and not spec.strip():
         raise ConfigError(
