@@ -79,6 +79,14 @@ def test_motion_prior_as_option_is_accepted(base, tmp_path):  # item 3
     assert r.exit_code == 0, r.output
 
 
+@pytest.mark.parametrize("opt", ["gate_rotation_deg=1E0", "max_iter=1E1", "gate_translation=1_000"])
+def test_numbers_yaml_leaves_as_strings_are_numbers(base, tmp_path, opt):
+    """YAML 1.1 reads ``1E0`` as a string; it used to reach ``np.radians`` (found by the
+    property test)."""
+    r = _odo(base, tmp_path / "o", "-m", "icp-point", "--max-frames", "3", "-O", opt)
+    assert r.exit_code == 0, r.output
+
+
 def test_help_example_option_works(base, tmp_path):  # "Also": the --help example
     r = runner.invoke(app, ["odometry", "--help"])
     assert "estimator_options.alpha=0.3" in r.output

@@ -162,3 +162,31 @@ def test_byte_mangled_scans(base, tmp_path, fmt, binary, ops):
     scans = [good[0], pts if pts is not None else np.zeros((0, 3)), good[2]]
     run = run_sequence(scans, "icp-point")
     _check_run(run, scans)
+
+
+finite_or_not = st.one_of(
+    st.floats(-1e3, 1e3),
+    st.sampled_from([np.nan, np.inf, -np.inf, 1e35, -1e20, 0.0]),
+)
+
+
+@SETTINGS
+@given(
+    n=st.integers(0, 40),
+    values=st.lists(finite_or_not, min_size=1, max_size=12),
+    seed=st.integers(0, 2**16),
+    method=st.sampled_from(["icp-point", "icp-plane", "feature:hods+gcc+alphabeta"]),
+)
+def test_random_arrays_through_the_odometry_api(n, values, seed, method):
+    """Scans of random size with NaN/inf/huge entries sprinkled into a plausible cloud."""
+    rng = np.random.default_rng(seed)
+    scans = []
+    for _ in range(3):
+        P = rng.uniform(-3.0, 3.0, (n, 3))
+        if n:
+            idx = rng.integers(0, P.size, len(values))
+            P.flat[idx] = values
+        scans.append(P)
+    run = run_sequence(scans, method)
+    finite = [P[np.isfinite(P).all(axis=1)] for P in scans]
+    _check_run(run, finite)

@@ -90,6 +90,27 @@ def test_unreadable_scan_cli_writes_everything_strict_aborts(moving_cloud, tmp_p
     assert not list(out2.glob(".*.tmp"))
 
 
+def test_ply_renamed_bin_in_a_sequence_is_flagged_not_ok(moving_cloud):  # item 7
+    """The issue's case: icp-point used to mark this frame ok with a 1.45e34 m jump."""
+    folder, poses = moving_cloud
+    seq = ScanSequence(folder)
+    f = seq.files[3]
+    f.rename(f.with_suffix(".bin"))
+    run = run_sequence(ScanSequence(folder), _Exact())
+    assert run.steps[3].status == "failed" and "PLY file" in run.steps[3].result.message
+    assert np.abs(run.poses[:, :3, 3]).max() < 10.0
+    np.testing.assert_allclose(run.poses[4:], poses[4:], atol=1e-9)
+
+
+def test_absurd_scan_array_is_never_registered(rng):
+    scan = rng.uniform(-5.0, 5.0, (100, 3))
+    odo = Odometry(_Exact())
+    odo.register_frame(scan)
+    step = odo.register_frame(scan * 1e35)
+    assert step.status == "failed" and "misread" in step.result.message
+    assert odo.register_frame(scan).status == "ok"
+
+
 def test_streamed_run_equals_in_memory_run(moving_cloud, tmp_path):  # item 16
     folder, _ = moving_cloud
     seq = ScanSequence(folder)

@@ -187,19 +187,25 @@ def check_options(
     *,
     where: str,
     skip: tuple[str, ...] = (),
-) -> None:
+) -> dict[str, Any]:
     """Check keyword ``options`` for ``target`` (a class or function) before using them.
 
     Unknown keys (with a "did you mean"), values of the wrong type (``max_iter=2.5`` or
     ``"abc"`` for an int), NaN floats and values outside :data:`OPTION_RANGES` raise a one-line
-    :class:`ConfigError` naming ``where``, the key and the accepted values. Nothing is coerced:
-    the options are passed on unchanged.
+    :class:`ConfigError` naming ``where``, the key and the accepted values.
+
+    Returns
+    -------
+    dict
+        The options with their values converted to the annotated types (``"1E0"`` → ``1.0``
+        for a float); keys the signature does not name (``**kwargs``) unchanged.
     """
     from pydantic import TypeAdapter
 
     params, open_ = option_parameters(target)
     for key in skip:
         params.pop(key, None)
+    out = dict(options)
     for key, value in options.items():
         if key not in params:
             if open_:
@@ -216,7 +222,7 @@ def check_options(
                 adapter = None
             if adapter is not None:
                 try:
-                    adapter.validate_python(value)
+                    value = out[key] = adapter.validate_python(value)
                 except ValidationError as e:
                     msg = e.errors()[0]["msg"] if e.errors() else str(e)
                     raise ConfigError(
@@ -231,6 +237,7 @@ def check_options(
             raise ConfigError(
                 f"{where}: option {key}={value!r} out of range (must be {_describe_range(r)})"
             )
+    return out
 
 
 def _ann_name(ann: Any) -> str:

@@ -7,7 +7,11 @@ is the inverse of this step; the estimators convert in one place, nowhere else.
 
 A frame whose registration is ``degenerate`` or ``failed`` (or raises) is never dropped: it keeps
 the **motion prior** (the last accepted step — constant velocity — by default, or the identity)
-and is flagged in :class:`OdometryStep`.
+and is flagged in :class:`OdometryStep`. Never ``ok``: a non-finite or non-rigid step, a step
+translated farther than the two scans reach (they could not overlap), a scan with coordinates
+beyond :data:`relnav.io.pointclouds.ABSURD_COORDINATE` (misread bytes) or an unreadable scan
+(:meth:`Odometry.skip_frame`); after such a scan the next one is registered onto the last
+usable scan.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
+from relnav.io.pointclouds import ABSURD_COORDINATE
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.types import Scan
@@ -113,8 +118,9 @@ class Odometry:
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
         self.motion_prior: MotionPrior = opts.motion_prior
-        self.gate_rotation = None if gate_rotation_deg is None else np.radians(gate_rotation_deg)
-        self.gate_translation = gate_translation
+        g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
+        self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
+        self.gate_translation = g_t
         self.pose = np.eye(4) if T0 is None else np.array(T0, dtype=float)
         self.last_step = np.eye(4)
         self._prev_points: np.ndarray | None = None
@@ -142,6 +148,12 @@ class Odometry:
         """
         points = scan.points if isinstance(scan, Scan) else np.asarray(scan, dtype=np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        reach = _reach(points)
+        if reach > ABSURD_COORDINATE:  # misread bytes, not a scene: never registered
+            return self.skip_frame(
+                f"scan coordinates up to {reach:.3g} m (limit {ABSURD_COORDINATE:.0e} m): "
+                "misread data?"
+            )
         t0 = time.perf_counter()
         prepared = None
         prepare_error = ""
@@ -151,7 +163,6 @@ class Odometry:
             except Exception as e:  # a bad scan must not stop the run
                 log.warning("frame %d: preparation failed: %s", self.n_frames, e)
                 prepare_error = f"{type(e).__name__}: {e}"
-        reach = _reach(points)
         if self.n_frames == 0:
             out = OdometryStep(
                 self.pose.copy(),

@@ -111,7 +111,7 @@ def get_registration(method: str, **options: Any) -> Registration:
     factory = _REGISTRY[prefix][0]
     built = _built_class(factory)
     if built is not None:
-        check_options(built, options, where=f"method {method!r}")
+        options = check_options(built, options, where=f"method {method!r}")
     try:
         return factory(spec.strip() or None, **options)
     except (TypeError, ValueError) as e:
