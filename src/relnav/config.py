@@ -235,7 +235,8 @@ def check_options(
         r = OPTION_RANGES.get(key)
         if r is not None and not _in_range(float(value), r):
             raise ConfigError(
-                f"{where}: option {key}={value!r} out of range (must be {_describe_range(r)})"
+                f"{where}: option {key}={options[key]!r} out of range "
+                f"(must be {_describe_range(r)})"
             )
     return out
 
