@@ -161,6 +161,13 @@ def test_huge_sensor_is_rejected_before_allocating(tmp_path):  # item 5
     assert isinstance(r.exception, ConfigError) and "rays per scan" in str(r.exception)
 
 
+def test_too_many_frames_is_a_config_error(tmp_path):
+    r = runner.invoke(
+        app, ["simulate", "sim-voyager", "--frames", "100000000", "--out", str(tmp_path / "s")]
+    )
+    assert isinstance(r.exception, ConfigError) and "--max-frames" in str(r.exception)
+
+
 def test_frames_do_not_cost_when_max_frames_is_small(tmp_path):  # item 6
     """1e8 path frames, 2 simulated: must finish (it used to allocate ~100 GB) and give the
     same first frames as a path of the same length simulated in full would (checked on a

@@ -53,6 +53,7 @@ from relnav.sim.attitude import make_attitude
 
 __all__ = [
     "MAX_RAYS_PER_SCAN",
+    "MAX_SIMULATED_FRAMES",
     "AttitudeSpec",
     "PointingSpec",
     "Scenario",
@@ -404,6 +405,11 @@ MAX_RAYS_PER_SCAN = 10_000_000
 at 0.1° has 460 800 rays)."""
 
 
+MAX_SIMULATED_FRAMES = 5_000_000
+"""Largest number of frames one simulation may write (its poses alone take ~1 KB per frame);
+longer runs: simulate pieces with ``max_frames``."""
+
+
 def n_simulated(sc: Scenario) -> int:
     """Frames actually simulated: ``frames``, or ``max_frames`` when smaller."""
     return sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
@@ -439,6 +445,11 @@ def _check_scenario(sc: Scenario, label: str) -> None:
                 f"{label}: sensors.{i} ({s.label}): {n_rays:.3g} rays per scan ({what}) "
                 f"exceeds the limit of {MAX_RAYS_PER_SCAN:.0e}"
             )
+    if n_simulated(sc) > MAX_SIMULATED_FRAMES:
+        raise ConfigError(
+            f"{label}: {n_simulated(sc)} frames to simulate exceeds the limit of "
+            f"{MAX_SIMULATED_FRAMES} (set max_frames / --max-frames)"
+        )
     try:
         times, pos = _traj.make_trajectory(
             sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params, n_keep=n_simulated(sc)
