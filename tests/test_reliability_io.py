@@ -139,3 +139,32 @@ def test_equal_timestamps_warn(rng, caplog):  # item 10
     with caplog.at_level(logging.WARNING):
         evaluate_trajectories(t_est, est, t, gt, max_diff=1.5)
     assert "share their timestamp" in caplog.text
+
+
+def test_relnav_evaluate_independent_of_row_order(rng, tmp_path):  # item 10, via the CLI
+    import json
+
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+    from relnav.io.trajectories import write_tum
+
+    t, est, gt = _trajectory(rng)
+    perm = rng.permutation(len(t))
+    write_tum(tmp_path / "gt.tum", t, gt)
+    write_tum(tmp_path / "sorted.tum", t, est)
+    write_tum(tmp_path / "shuffled.tum", t[perm], est[perm])
+    out = {}
+    for name in ("sorted", "shuffled"):
+        j = tmp_path / f"{name}.json"
+        r = CliRunner().invoke(
+            app,
+            ["evaluate", str(tmp_path / f"{name}.tum"), str(tmp_path / "gt.tum"), "--json", str(j)],
+        )
+        assert r.exit_code == 0, r.output
+        out[name] = json.loads(j.read_text())
+    from relnav.eval.metrics import METRIC_KEYS
+
+    keys = [k for k in METRIC_KEYS if k in out["sorted"] and k != "time_ms"]
+    assert keys
+    assert {k: out["sorted"][k] for k in keys} == {k: out["shuffled"][k] for k in keys}
