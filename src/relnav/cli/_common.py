@@ -25,6 +25,7 @@ def parse_options(items: Iterable[str] | None) -> dict[str, Any]:
             value = yaml.safe_load(raw)
         except yaml.YAMLError:
             value = raw
+        value = _number(value)
         node = out
         parts = key.strip().split(".")
         for p in parts[:-1]:
@@ -33,6 +34,22 @@ def parse_options(items: Iterable[str] | None) -> dict[str, Any]:
                 raise ConfigError(f"option {item!r} conflicts with another option")
         node[parts[-1]] = value
     return out
+
+
+def _number(value: Any) -> Any:
+    """A string YAML 1.1 leaves unparsed but Python reads as a number (``1E0``, ``nan``,
+    ``inf``, ``1_000``) → that number; anything else unchanged."""
+    if not isinstance(value, str):
+        return value
+    s = value.strip()
+    try:
+        return int(s)
+    except ValueError:
+        pass
+    try:
+        return float(s)
+    except ValueError:
+        return value
 
 
 def progress_bar() -> Progress:

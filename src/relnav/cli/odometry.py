@@ -19,8 +19,12 @@ class PoseFormat(StrEnum):
     kitti = "kitti"
 
 
-def prepare_method(method: str, option: list[str] | None) -> tuple[str, dict[str, Any], str | None]:
+def prepare_method(
+    method: str, option: list[str] | dict[str, Any] | None
+) -> tuple[str, dict[str, Any], str | None]:
     """Expand a preset and check the method and its options before any frame is read.
+
+    ``option`` is the ``-O key=value`` list or the dict already parsed from it.
 
     Returns ``(method string, options, preset name or None)``; raises
     :class:`~relnav.errors.ConfigError` (with "did you mean") for an unknown name or bad options.
@@ -28,7 +32,8 @@ def prepare_method(method: str, option: list[str] | None) -> tuple[str, dict[str
     from relnav.odometry.presets import resolve_method
     from relnav.odometry.runner import make_tracker
 
-    name, opts, preset = resolve_method(method, parse_options(option))
+    parsed = option if isinstance(option, dict) else parse_options(option)
+    name, opts, preset = resolve_method(method, parsed)
     make_tracker(name, **opts)  # builds the method: bad options fail here, not after frame 0
     return name, opts, preset
 
@@ -167,15 +172,20 @@ def odometry(
     topic: str = typer.Option(
         None, "--topic", help="PointCloud2 topic of a recording (needed if it has several)."
     ),
-    max_frames: int = typer.Option(None, "--max-frames", help="Stop after N frames."),
+    max_frames: int = typer.Option(None, "--max-frames", help="Stop after N frames (N >= 0)."),
     motion_prior: str = typer.Option(
-        "constant_velocity", "--motion-prior", help="constant_velocity | identity"
+        None, "--motion-prior", help="constant_velocity (default) | identity"
     ),
     option: list[str] = typer.Option(
         None,
         "--option",
         "-O",
-        help="Method option key=value (repeatable; dots nest: estimator_options.alpha0=0.3).",
+        help="Method option key=value (repeatable; dots nest: estimator_options.alpha=0.3). "
+        "Odometry options: motion_prior, initial_pose (gt | identity | 16 numbers), "
+        "gate_rotation_deg, gate_translation.",
+    ),
+    strict: bool = typer.Option(
+        False, "--strict", help="Abort on an unreadable scan (default: flag the frame, go on)."
     ),
     fmt: PoseFormat = typer.Option(
         PoseFormat.tum,
@@ -202,11 +212,24 @@ def odometry(
     """
     from rich.table import Table
 
+    from relnav.errors import ConfigError, InputError
     from relnav.io.sources import open_sequence
     from relnav.odometry import run_sequence
+    from relnav.odometry.options import check_max_frames
 
-    name, opts, preset = prepare_method(method, option)
+    max_frames = check_max_frames(max_frames)
+    opts = parse_options(option)
+    prior = opts.pop("motion_prior", None)
+    if prior is not None and motion_prior is not None and prior != motion_prior:
+        raise ConfigError(
+            f"--motion-prior {motion_prior} and -O motion_prior={prior} disagree; give one"
+        )
+    motion_prior = motion_prior or prior or "constant_velocity"
+    initial_pose = opts.pop("initial_pose", "gt")
+    name, opts, preset = prepare_method(method, opts)
     seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
+    if len(seq) == 0:
+        raise InputError(f"{seq_dir}: no scan files to run odometry on")
     n = len(seq) if max_frames is None else min(len(seq), max_frames)
     live = None
     if viz or rrd is not None:
@@ -230,9 +253,13 @@ def odometry(
         run = run_sequence(
             seq,
             name,
+            initial_pose=initial_pose,
             motion_prior=motion_prior,  # type: ignore[arg-type]
             max_frames=max_frames,
             progress=step,
+            out=out,
+            keep_steps=name == "relnav",  # the navigator's state output needs its steps
+            strict=strict,
             **opts,
         )
     wall = time.perf_counter() - t0
@@ -243,7 +270,6 @@ def odometry(
             console.print(
                 f"streamed to {live.path} (open with: rerun {live.path})", highlight=False
             )
-    out = Path(out)
     live_file = []
     if live is not None and live.path is not None:
         live_file = [
@@ -269,6 +295,10 @@ def odometry(
         if key in m:
             table.add_row(key, f"{m[key]:.4g}")
     console.print(table)
+    if seq.gt_poses is not None and n < 2:
+        console.print(
+            f"[yellow]evaluation needs at least two frames ({n} estimated): metrics skipped[/]"
+        )
     written = sorted(p.name for p in out.iterdir() if p.is_file())
     console.print(f"wrote {out}/: {', '.join(written)}", highlight=False)
 

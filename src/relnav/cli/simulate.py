@@ -25,6 +25,7 @@ def build_scenario(
     source: str,
     *,
     frames: int | None = None,
+    max_frames: int | None = None,
     seed: int | None = None,
     target_mesh: Path | None = None,
     scale_to: float | None = None,
@@ -62,6 +63,7 @@ def build_scenario(
         sc = get_preset(
             source,
             frames=frames,
+            max_frames=max_frames,
             seed=seed,
             target_mesh=None if target_mesh is None else str(target_mesh),
             **kwargs,
@@ -78,6 +80,8 @@ def build_scenario(
         from relnav.config import load_yaml
 
         data = load_yaml(p)
+        if not data:
+            raise ConfigError(f"{p}: empty scenario file (no keys)")
         if plain:
             raise ConfigError(
                 f"--param {', '.join(sorted(plain))}: use dotted scenario keys for a YAML "
@@ -85,6 +89,8 @@ def build_scenario(
             )
         if frames is not None:
             data["frames"] = frames
+        if max_frames is not None:
+            data["max_frames"] = max_frames
         if seed is not None:
             data["seed"] = seed
         if target_mesh is not None or scale_to is not None:
@@ -148,13 +154,12 @@ def simulate(
     sc = build_scenario(
         source,
         frames=frames,
+        max_frames=max_frames,
         seed=seed,
         target_mesh=target_mesh,
         scale_to=scale_to,
         params=_params(param),
     )
-    if max_frames is not None:
-        sc.max_frames = max_frames
     n_sim = sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
     with progress_bar() as bar:
         task = bar.add_task(f"simulate {sc.name}", total=n_sim)

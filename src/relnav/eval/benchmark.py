@@ -869,9 +869,11 @@ ProgressFn = Callable[[int, int, dict[str, Any]], None]
 
 
 def _write_grid(grid: GridSpec, out: Path) -> None:
+    from relnav.io.atomic import atomic_write_text
+
     data = grid.model_dump(mode="json")
     data["grid_hash"] = grid.grid_hash()
-    dump_yaml(data, out / GRID_FILE)
+    atomic_write_text(out / GRID_FILE, dump_yaml(data))
 
 
 def read_grid(out_dir: str | Path) -> GridSpec:
@@ -893,6 +895,7 @@ def run_benchmark(
     force: bool = False,
     retry_failed: bool = False,
     progress: ProgressFn | None = None,
+    lock_timeout: float | None = None,
 ) -> BenchmarkSummary:
     """Run every unfinished job of ``grid`` into ``out_dir`` (see the module docstring).
 
@@ -913,6 +916,9 @@ def run_benchmark(
         Rerun jobs recorded as failed.
     progress : callable, optional
         ``progress(done, total, row)`` after each job is stored.
+    lock_timeout : float, optional
+        Seconds to wait for another benchmark holding ``out_dir`` (default: as long as it
+        takes; it then skips the jobs the other one finished).
 
     Returns
     -------
@@ -923,7 +929,7 @@ def run_benchmark(
     Local workers are separate processes started with ``spawn``: a script calling this
     function must guard its entry point with ``if __name__ == "__main__":``.
     """
-    from relnav.eval.store import ResultsStore
+    from relnav.io.locks import FolderLock
 
     if not isinstance(grid, GridSpec):
         grid = load_grid(grid)
@@ -931,6 +937,23 @@ def run_benchmark(
         raise ConfigError(f"workers must be >= 0, got {workers}")
     out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    # One benchmark at a time per folder: a second process waits, then skips what the first
+    # finished (the lock dies with its holder, even on SIGKILL).
+    with FolderLock(out, timeout=lock_timeout, what="relnav benchmark"):
+        return _run_locked(grid, out, workers, scheduler, force, retry_failed, progress)
+
+
+def _run_locked(
+    grid: GridSpec,
+    out: Path,
+    workers: int,
+    scheduler: str | None,
+    force: bool,
+    retry_failed: bool,
+    progress: ProgressFn | None,
+) -> BenchmarkSummary:
+    from relnav.eval.store import ResultsStore
+
     _write_grid(grid, out)
     jobs = expand_jobs(grid)
     gh = grid.grid_hash()

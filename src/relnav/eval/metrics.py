@@ -826,7 +826,8 @@ class MatchedTrajectories:
     est_poses, gt_poses : (K, 4, 4) float64
         Aligned estimate and ground truth, row ``k`` at the same time.
     idx_est, idx_gt : (K,) int64
-        Indices into the original inputs.
+        Indices into the original inputs, in ground-truth time order (whatever the row order
+        of the inputs).
     T_align : (4, 4) float64
         Transform applied to the estimate (GT frame ← estimate frame).
     n_est, n_gt : int
@@ -877,7 +878,19 @@ def match_trajectories(
         raise InputError(f"t_gt has {len(tg)} stamps but gt_poses has {len(gt)} poses")
     if align not in ALIGN_METHODS:
         raise InputError(f"unknown alignment {align!r}; choose one of {', '.join(ALIGN_METHODS)}")
+    for name, t in (("estimate", te), ("ground truth", tg)):
+        n_dup = int(t.size - np.unique(t).size)
+        if n_dup:
+            log.warning(
+                "%s: %d poses share their timestamp with another; such poses are matched "
+                "in row order",
+                name,
+                n_dup,
+            )
     idx_est, idx_gt = associate(te, tg, max_diff=max_diff, offset=offset)
+    # time order, not file row order: the relative metrics follow the trajectory
+    srt = np.lexsort((idx_est, tg[idx_gt]))
+    idx_est, idx_gt = idx_est[srt], idx_gt[srt]
     k = len(idx_est)
     need = max(2, int(min_matches))
     if k < need:

@@ -239,9 +239,10 @@ class ResultsStore:
     def to_csv(self, path: str | Path, job_ids: Iterable[str] | None = None) -> Path:
         """Write the (selected) rows as CSV, every column; returns the path."""
         rows = self.rows(job_ids)
+        from relnav.io.atomic import atomic_open
+
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        with p.open("w", newline="") as f:
+        with atomic_open(p, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(_NAMES), extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)

@@ -15,7 +15,11 @@ Rows whose coordinates are NaN or infinite are dropped with a warning on the ``r
 ``(0, 3)``.
 
 Every problem with a file raises :class:`relnav.errors.InputError` naming the file: missing
-file, unknown extension, truncated or corrupt content, wrong shape, no ``x``/``y``/``z``.
+file, unknown extension, truncated or corrupt content, wrong shape, no ``x``/``y``/``z``, a
+binary body whose length disagrees with the header (PLY, PCD, KITTI ``.bin``), a file of another
+format behind the extension, or coordinates beyond :data:`ABSURD_COORDINATE` (the signature of
+bytes read with the wrong type). **[interpretation]** Coordinates beyond
+:data:`SANE_COORDINATE` are accepted with a warning.
 
 Writers are deterministic: the same input gives byte-identical files (no dates, no random ids).
 Text formats print the shortest decimal that round-trips (Python ``repr``), so float64 values are
@@ -40,7 +44,9 @@ from relnav.errors import InputError
 from relnav.types import Scan
 
 __all__ = [
+    "ABSURD_COORDINATE",
     "POINT_READ_EXTENSIONS",
+    "SANE_COORDINATE",
     "POINT_WRITE_EXTENSIONS",
     "lzf_decompress",
     "read_points",
@@ -66,6 +72,22 @@ POINT_READ_EXTENSIONS: tuple[str, ...] = (
 
 POINT_WRITE_EXTENSIONS: tuple[str, ...] = POINT_READ_EXTENSIONS
 """Extensions :func:`write_points` can write (lower case)."""
+
+ABSURD_COORDINATE = 1.0e9
+"""|coordinate| (m) above which a file is rejected as misread (25x the geostationary radius;
+float32 garbage is typically ~1e20-1e38)."""
+
+SANE_COORDINATE = 1.0e5
+"""|coordinate| (m) above which a scan is accepted with a warning (no LIDAR ranges 100 km)."""
+
+_MAGIC = {
+    b"ply\n": "PLY",
+    b"ply\r": "PLY",
+    b"# .PCD": "PCD",
+    b"VERSION": "PCD",
+    b"\x93NUMPY": "NPY",
+    b"LASF": "LAS/LAZ",
+}
 
 # Field names recognised for the optional per-point attributes (compared in lower case).
 _INTENSITY_NAMES = (
@@ -246,6 +268,7 @@ def _read_any(path: str | Path) -> _Cloud:
         )
     if not p.is_file():
         raise InputError(f"{p}: no such file")
+    _check_magic(p, ext)
     if ext == ".ply":
         c = _read_ply(p)
     elif ext == ".pcd":
@@ -259,6 +282,22 @@ def _read_any(path: str | Path) -> _Cloud:
     else:
         c = _read_las(p)
     return _finalize(p, c)
+
+
+def _check_magic(p: Path, ext: str) -> None:
+    """InputError when the file starts with another format's signature (e.g. a PLY renamed
+    ``.bin``): its bytes would otherwise be read as points."""
+    with p.open("rb") as f:
+        head = f.read(8)
+    for magic, fmt in _MAGIC.items():
+        if head.startswith(magic):
+            expected = {"PLY": ".ply", "PCD": ".pcd", "NPY": ".npy", "LAS/LAZ": (".las", ".laz")}
+            if ext not in expected[fmt]:
+                raise InputError(f"{p}: this is a {fmt} file, not a {ext} file (rename it)")
+            return
+    if ext in (".ply", ".npy", ".las", ".laz"):
+        want = {".ply": "PLY", ".npy": "NPY", ".las": "LAS/LAZ", ".laz": "LAS/LAZ"}[ext]
+        raise InputError(f"{p}: not a {want} file (no {want} signature at the start)")
 
 
 def _finalize(p: Path, c: _Cloud) -> _Cloud:
@@ -277,6 +316,20 @@ def _finalize(p: Path, c: _Cloud) -> _Cloud:
     times = _col(c.timestamps)
     normals = _col(c.normals, 3)
     ok = np.isfinite(pts).all(axis=1)
+    if n:
+        big = float(np.max(np.abs(np.where(ok[:, None], pts, 0.0))))
+        if big > ABSURD_COORDINATE:
+            raise InputError(
+                f"{p}: coordinates up to {big:.3g} m (limit {ABSURD_COORDINATE:.0e} m): the data "
+                "are misread (wrong extension, SIZE/TYPE or byte order?)"
+            )
+        if big > SANE_COORDINATE:
+            logger.warning(
+                "%s: coordinates up to %.3g m, beyond %.0e m: check the units",
+                p,
+                big,
+                SANE_COORDINATE,
+            )
     n_bad = int(n - np.count_nonzero(ok))
     if n_bad:
         logger.warning("%s: dropped %d of %d points with NaN/inf coordinates", p, n_bad, n)
@@ -313,6 +366,20 @@ def _validate_for_write(
             raise InputError(f"{p}: {name} must have shape ({n},), got {a.shape}")
         extras.append(a)
     ok = np.isfinite(pts).all(axis=1)
+    if n:
+        big = float(np.max(np.abs(np.where(ok[:, None], pts, 0.0))))
+        if big > ABSURD_COORDINATE:
+            raise InputError(
+                f"{p}: coordinates up to {big:.3g} m (limit {ABSURD_COORDINATE:.0e} m): the data "
+                "are misread (wrong extension, SIZE/TYPE or byte order?)"
+            )
+        if big > SANE_COORDINATE:
+            logger.warning(
+                "%s: coordinates up to %.3g m, beyond %.0e m: check the units",
+                p,
+                big,
+                SANE_COORDINATE,
+            )
     n_bad = int(n - np.count_nonzero(ok))
     if n_bad:
         logger.warning("%s: dropped %d of %d points with NaN/inf coordinates", p, n_bad, n)
@@ -403,6 +470,7 @@ def _read_ply(p: Path) -> _Cloud:
             ply = PlyData.read(f, mmap="c")  # memory-mapped: ~500x faster than mmap=False
     except Exception as e:  # plyfile raises many types on bad input
         raise InputError(f"{p}: corrupt or truncated PLY file ({type(e).__name__}: {e})") from None
+    _check_ply_size(p, ply)
     elements = list(ply.elements)
     el = next((e for e in elements if e.name == "vertex"), None)
     if el is None or _pick_fields([q.name for q in el.properties]).xyz is None:
@@ -416,6 +484,31 @@ def _read_ply(p: Path) -> _Cloud:
         return roles.build(lambda n: np.array(data[n], dtype=np.float64, copy=True))
     except (TypeError, ValueError) as e:
         raise InputError(f"{p}: PLY x/y/z properties are not numeric scalars ({e})") from None
+
+
+def _check_ply_size(p: Path, ply: object) -> None:
+    """InputError when a binary PLY with fixed-size rows has more bytes than its header
+    declares (the counts or types in the header are wrong)."""
+    from plyfile import PlyListProperty
+
+    if getattr(ply, "text", True):
+        return
+    elements = list(ply.elements)  # type: ignore[attr-defined]
+    if any(isinstance(q, PlyListProperty) for e in elements for q in e.properties):
+        return
+    with p.open("rb") as f:
+        head = f.read(1 << 16)
+    i = head.find(b"end_header")
+    j = head.find(b"\n", i) if i >= 0 else -1
+    if j < 0:
+        return
+    body = sum(e.count * e.dtype(ply.byte_order).itemsize for e in elements)  # type: ignore[attr-defined]
+    size = p.stat().st_size
+    if size > j + 1 + body:
+        raise InputError(
+            f"{p}: binary PLY has {size - j - 1} data bytes but its header declares {body}: "
+            "element counts or property types are wrong"
+        )
 
 
 def _write_ply(
@@ -639,6 +732,14 @@ def _read_pcd(p: Path) -> _Cloud:
                 raise InputError(
                     f"{p}: PCD ascii rows have {table.shape[1]} values, header says {ncols}"
                 )
+            if table.shape[0] > npts:
+                logger.warning(
+                    "%s: PCD ascii data has %d rows but POINTS = %d: reading the first %d",
+                    p,
+                    table.shape[0],
+                    npts,
+                    npts,
+                )
             cols = {f: table[:npts, i] for f, i in use.items()}
     elif mode in ("binary", "binary_compressed"):
         names = [f if f not in fields[:i] else f"__dup{i}" for i, f in enumerate(fields)]
@@ -653,6 +754,12 @@ def _read_pcd(p: Path) -> _Cloud:
             if len(body) < need:
                 raise InputError(
                     f"{p}: truncated PCD binary data: {len(body)} bytes, expected {need}"
+                )
+            if len(body) > need:
+                raise InputError(
+                    f"{p}: PCD binary data has {len(body)} bytes but the header (POINTS "
+                    f"{npts}, SIZE/COUNT: {dt.itemsize} bytes per point) needs {need}: "
+                    "POINTS or SIZE/TYPE is wrong"
                 )
             rec = np.frombuffer(body, dtype=dt, count=npts)
             for f in wanted:

@@ -13,13 +13,16 @@ Layout (only ``scans/`` is required)::
 
 Scan points are in the sensor frame. **[interpretation]** Scan files are ordered by *natural*
 name order (``scan2`` before ``scan10``), identical to plain sorting for zero-padded names; files
-with other extensions in ``scans/`` are ignored. When ``timestamps.txt`` is absent the scan times
-come from the ground-truth TUM file if it has one row per scan, else they are ``0, 1, 2, ...``.
+with other extensions in ``scans/`` are ignored with a warning, hidden files (``.name``: the
+temporary names of scans being written) silently. Scan times must increase strictly. When
+``timestamps.txt`` is absent the scan times come from the ground-truth TUM file if it has one
+row per scan, else they are ``0, 1, 2, ...``.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -31,6 +34,7 @@ import numpy as np
 
 from relnav.config import dump_yaml, load_yaml
 from relnav.errors import ConfigError, InputError
+from relnav.io.atomic import atomic_write_text
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, POINT_WRITE_EXTENSIONS, read_scan
 from relnav.io.pointclouds import write_points as _write_points
 from relnav.io.trajectories import read_tum, write_tum
@@ -104,7 +108,11 @@ def _natural_key(name: str) -> list[Any]:
 
 
 def _scan_files(d: Path) -> list[Path]:
-    files = [q for q in d.iterdir() if q.is_file() and q.suffix.lower() in POINT_READ_EXTENSIONS]
+    files = [
+        q
+        for q in d.iterdir()
+        if q.is_file() and q.suffix.lower() in POINT_READ_EXTENSIONS and not q.name.startswith(".")
+    ]
     return sorted(files, key=lambda q: (_natural_key(q.name), q.name))
 
 
@@ -129,6 +137,40 @@ def _read_timestamps(p: Path) -> np.ndarray:
             raise InputError(f"{p}: line {no}: NaN or infinite timestamp")
         vals.append(v)
     return np.asarray(vals, dtype=np.float64)
+
+
+def _check_increasing(t: np.ndarray, source: Path) -> None:
+    """InputError naming the first scan time that is not after the previous one."""
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        kind = "duplicate" if t[k] == t[k - 1] else "decreasing"
+        raise InputError(
+            f"{source}: scan times must increase: {kind} time {t[k]!r} s at scan {k} "
+            f"(previous {t[k - 1]!r} s; {bad.size} such scans)"
+        )
+
+
+def _warn_ignored(d: Path, n: int) -> None:
+    """Warn about files of ``d`` that are not scans (unsupported extensions) or no scans."""
+    other = sorted(
+        q.suffix.lower() or q.name
+        for q in d.iterdir()
+        if q.is_file()
+        and q.suffix.lower() not in POINT_READ_EXTENSIONS
+        and not q.name.startswith(".")
+    )
+    if other:
+        kinds = ", ".join(sorted(set(other)))
+        logger.warning(
+            "%s: ignoring %d files that are not scans (%s); scan extensions: %s",
+            d,
+            len(other),
+            kinds,
+            " ".join(POINT_READ_EXTENSIONS),
+        )
+    if n == 0:
+        logger.warning("%s: no scan files found", d)
 
 
 def _to_builtin(x: Any) -> Any:
@@ -180,8 +222,7 @@ class ScanSequence:
             raise InputError(f"{lay.scans_dir}: missing scans folder{hint}")
         self._files = _scan_files(lay.scans_dir)
         n = len(self._files)
-        if n == 0:
-            logger.warning("%s: no scan files found", lay.scans_dir)
+        _warn_ignored(lay.scans_dir, n)
         self._meta = _read_yaml(lay.sensor_yaml) if lay.sensor_yaml.is_file() else {}
         self._gt: np.ndarray | None = None
         self._gt_loaded = False
@@ -192,6 +233,7 @@ class ScanSequence:
                 raise InputError(
                     f"{lay.timestamps}: {t.shape[0]} timestamps for {n} scans in {lay.scans_dir}"
                 )
+            _check_increasing(t, lay.timestamps)
             self._times = t
         self._times_from_file = self._times is not None
 
@@ -233,6 +275,7 @@ class ScanSequence:
                     logger.warning("ignoring ground-truth times: %s", e)
                 else:
                     if t.shape[0] == n:
+                        _check_increasing(t, self._layout.gt)
                         times = t
             self._times = times
             self._times_from_file = False
@@ -366,7 +409,7 @@ class SequenceWriter:
             if old and not overwrite:
                 raise InputError(
                     f"{lay.scans_dir}: already holds {len(old)} scan files "
-                    "(pass overwrite=True to replace them)"
+                    "(pass overwrite=True, or --overwrite on the command line, to replace them)"
                 )
             for q in old:
                 q.unlink()
@@ -448,9 +491,14 @@ class SequenceWriter:
             if pose.shape != (4, 4) or not np.isfinite(pose).all():
                 raise InputError(f"frame {k}: T_target_sensor must be a finite (4, 4) matrix")
         path = self._layout.scans_dir / f"{k:06d}{self._ext}"
-        _write_points(
-            path, points, intensity=intensity, timestamps=per_point_t, binary=self._binary
-        )
+        tmp = path.with_name(f".{k:06d}.{os.getpid()}.tmp{self._ext}")  # hidden: not a scan
+        try:
+            _write_points(
+                tmp, points, intensity=intensity, timestamps=per_point_t, binary=self._binary
+            )
+            os.replace(tmp, path)  # a killed writer never leaves a half-written scan
+        finally:
+            tmp.unlink(missing_ok=True)
         self._times.append(t)
         self._poses.append(pose)
         return path
@@ -464,7 +512,7 @@ class SequenceWriter:
         if self._closed:
             return
         self._closed = True
-        lay.timestamps.write_text("".join(f"{t!r}\n" for t in self._times), encoding="ascii")
+        atomic_write_text(lay.timestamps, "".join(f"{t!r}\n" for t in self._times), "ascii")
         have = [q is not None for q in self._poses]
         if self._poses and all(have):
             write_tum(lay.gt, np.asarray(self._times), np.stack(self._poses))  # type: ignore[arg-type]

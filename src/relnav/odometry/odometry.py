@@ -7,7 +7,11 @@ is the inverse of this step; the estimators convert in one place, nowhere else.
 
 A frame whose registration is ``degenerate`` or ``failed`` (or raises) is never dropped: it keeps
 the **motion prior** (the last accepted step — constant velocity — by default, or the identity)
-and is flagged in :class:`OdometryStep`.
+and is flagged in :class:`OdometryStep`. Never ``ok``: a non-finite or non-rigid step, a step
+translated farther than the two scans reach (they could not overlap), a scan with coordinates
+beyond :data:`relnav.io.pointclouds.ABSURD_COORDINATE` (misread bytes) or an unreadable scan
+(:meth:`Odometry.skip_frame`); after such a scan the next one is registered onto the last
+usable scan.
 """
 
 from __future__ import annotations
@@ -19,9 +23,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from relnav.errors import RelnavError
+from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
+from relnav.io.pointclouds import ABSURD_COORDINATE
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.types import Scan
@@ -97,18 +102,32 @@ class Odometry:
         gate_translation: float | None = None,
         **method_options: Any,
     ) -> None:
+        from relnav.odometry.options import check_odometry_options, parse_initial_pose
+
+        opts = check_odometry_options(
+            {
+                "motion_prior": motion_prior,
+                "gate_rotation_deg": gate_rotation_deg,
+                "gate_translation": gate_translation,
+            }
+        )
+        T0 = parse_initial_pose(initial_pose)
+        if isinstance(T0, str):
+            raise ConfigError("Odometry: initial_pose must be a (4, 4) matrix or None")
         self.registration = (
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
-        if motion_prior not in ("constant_velocity", "identity"):
-            raise RelnavError(f"unknown motion prior {motion_prior!r}")
-        self.motion_prior: MotionPrior = motion_prior
-        self.gate_rotation = None if gate_rotation_deg is None else np.radians(gate_rotation_deg)
-        self.gate_translation = gate_translation
-        self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
+        self.motion_prior: MotionPrior = opts.motion_prior
+        g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
+        self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
+        self.gate_translation = g_t
+        self.pose = np.eye(4) if T0 is None else np.array(T0, dtype=float)
         self.last_step = np.eye(4)
         self._prev_points: np.ndarray | None = None
         self._prev_prepared: Any = None
+        self._prev_reach = 0.0
+        self._anchor_pose = self.pose.copy()
+        self._gap = 0
         self.n_frames = 0
 
     @property
@@ -116,10 +135,25 @@ class Odometry:
         """The step the motion prior predicts for the next frame."""
         return self.last_step.copy() if self.motion_prior == "constant_velocity" else np.eye(4)
 
+    def _prior_over(self, n_steps: int) -> np.ndarray:
+        """The motion prior over ``n_steps`` frames (``prior_step ** n_steps``)."""
+        return np.linalg.matrix_power(self.prior_step, max(int(n_steps), 1))
+
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
-        """Register a new scan onto the previous one and advance the pose chain."""
+        """Register a new scan onto the previous one and advance the pose chain.
+
+        After frames skipped with :meth:`skip_frame`, the scan is registered onto the last
+        usable scan (initial guess: the motion prior over the gap) and the pose chain restarts
+        from that scan's pose.
+        """
         points = scan.points if isinstance(scan, Scan) else np.asarray(scan, dtype=np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        reach = _reach(points)
+        if reach > ABSURD_COORDINATE:  # misread bytes, not a scene: never registered
+            return self.skip_frame(
+                f"scan coordinates up to {reach:.3g} m (limit {ABSURD_COORDINATE:.0e} m): "
+                "misread data?"
+            )
         t0 = time.perf_counter()
         prepared = None
         prepare_error = ""
@@ -140,12 +174,19 @@ class Odometry:
                 time.perf_counter() - t0,
             )
         else:
-            result = self._register(points, prepared, prepare_error)
+            gap = self._gap + 1  # frames between the previous usable scan and this one
+            prior = self._prior_over(gap)
+            if self._prev_points is None:
+                result = RegistrationResult(status="failed", message="no usable previous scan")
+            else:
+                result = self._register(points, prepared, prepare_error, prior)
             if result.status == "ok":
-                self._apply_gate(result)
+                self._check_plausible(result, reach)
+            if result.status == "ok":
+                self._apply_gate(result, prior)
             used_prior = result.status != "ok"
-            step = self.prior_step if used_prior else result.T_target_source
             if used_prior:
+                step = self.prior_step
                 log.info(
                     "frame %d: registration %s (%s); using the %s motion prior",
                     self.n_frames,
@@ -153,9 +194,15 @@ class Odometry:
                     result.message,
                     self.motion_prior,
                 )
-            else:
+                self.pose = self.pose @ step
+            elif gap == 1:
+                step = result.T_target_source
                 self.last_step = step.copy()
-            self.pose = self.pose @ step
+                self.pose = self.pose @ step
+            else:  # registered across a gap: restart the chain from the last usable scan
+                new_pose = self._anchor_pose @ result.T_target_source
+                step = invert(self.pose) @ new_pose
+                self.pose = new_pose
             out = OdometryStep(
                 self.pose.copy(),
                 step.copy(),
@@ -167,16 +214,67 @@ class Odometry:
             )
         self._prev_points = points
         self._prev_prepared = prepared
+        self._prev_reach = reach
+        self._anchor_pose = self.pose.copy()
+        self._gap = 0
         self.n_frames += 1
         return out
 
-    def _apply_gate(self, result: RegistrationResult) -> None:
+    def skip_frame(self, reason: str) -> OdometryStep:
+        """Flag a frame whose scan could not be read: status ``failed``, pose from the motion
+        prior; the next scan is registered onto the last usable one."""
+        t0 = time.perf_counter()
+        result = RegistrationResult(status="failed", message=reason)
+        if self.n_frames == 0:
+            step = np.eye(4)
+            self._prev_points = None
+        else:
+            step = self.prior_step
+            self.pose = self.pose @ step
+        if self._prev_points is None:  # nothing usable yet: the next scan starts the chain
+            self._anchor_pose = self.pose.copy()
+        else:
+            self._gap += 1
+        log.warning("frame %d: skipped (%s)", self.n_frames, reason)
+        self.n_frames += 1
+        return OdometryStep(
+            self.pose.copy(), step.copy(), result, True, "failed", 0, time.perf_counter() - t0
+        )
+
+    def _check_plausible(self, result: RegistrationResult, reach: float) -> None:
+        """Reject (in place) an ``ok`` step that no scene allows: non-finite or non-rigid, or
+        translated farther than the two scans reach (then they cannot overlap at all).
+
+        Points are in the sensor frame, within ``reach`` (m) of it, so ``target = T source``
+        with any overlap needs ``|t| <= reach_source + reach_target``.
+        """
+        T = np.asarray(result.T_target_source, dtype=np.float64)
+        R = T[:3, :3]
+        if (
+            T.shape != (4, 4)
+            or not np.isfinite(T).all()
+            or np.abs(R.T @ R - np.eye(3)).max() > 1e-6
+            or np.linalg.det(R) <= 0
+        ):
+            result.status = "failed"
+            result.message = "registration returned a non-finite or non-rigid transform"
+            return
+        bound = reach + self._prev_reach
+        t = float(np.linalg.norm(T[:3, 3]))
+        if not t <= bound:
+            result.status = "failed"
+            result.message = (
+                f"step translation {t:.3g} m exceeds what the scans allow ({bound:.3g} m: "
+                "they could not overlap)"
+            )
+
+    def _apply_gate(self, result: RegistrationResult, prior: np.ndarray) -> None:
         """Reject (in place) a step too far from the motion prior."""
         if self.gate_rotation is None and self.gate_translation is None:
             return
-        d = invert(self.prior_step) @ result.T_target_source
+        d = invert(prior) @ result.T_target_source
         d_rot = rotation_angle(d[:3, :3])
-        d_t = float(np.linalg.norm(result.T_target_source[:3, 3] - self.prior_step[:3, 3]))
+        d_t = float(np.linalg.norm(result.T_target_source[:3, 3] - prior[:3, 3]))
         if (self.gate_rotation is not None and d_rot > self.gate_rotation) or (
             self.gate_translation is not None and d_t > self.gate_translation
         ):
@@ -188,18 +286,27 @@ class Odometry:
             result.info["gated"] = True
 
     def _register(
-        self, points: np.ndarray, prepared: Any, prepare_error: str
+        self, points: np.ndarray, prepared: Any, prepare_error: str, prior: np.ndarray
     ) -> RegistrationResult:
         if prepare_error:
             return RegistrationResult(status="failed", message=prepare_error)
         try:
             if prepared is not None and self._prev_prepared is not None:
                 return self.registration.register_prepared(  # type: ignore[union-attr]
-                    prepared, self._prev_prepared, init=self.prior_step
+                    prepared, self._prev_prepared, init=prior
                 )
             if prepared is None and isinstance(self.registration, PreparedRegistration):
                 return RegistrationResult(status="failed", message="previous frame unusable")
-            return self.registration.register(points, self._prev_points, init=self.prior_step)
+            return self.registration.register(points, self._prev_points, init=prior)
         except Exception as e:  # never let one frame stop the run; flag it
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
+
+def _reach(points: np.ndarray) -> float:
+    """Largest distance (m) of a finite point from the sensor; 0 for no finite point."""
+    if points.size == 0:
+        return 0.0
+    n = np.sqrt(np.einsum("ij,ij->i", points, points))
+    n = n[np.isfinite(n)]
+    return float(n.max()) if n.size else 0.0

@@ -12,11 +12,20 @@ from typing import Any
 import numpy as np
 
 from relnav._threads import limit_blas_threads
+from relnav.errors import InputError
 from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
 from relnav.registration.base import Registration
 from relnav.types import Scan
 
-__all__ = ["DIAGNOSTIC_STAGES", "NAVIGATOR_METHOD", "OdometryRun", "make_tracker", "run_sequence"]
+__all__ = [
+    "DIAGNOSTIC_COLUMNS",
+    "DIAGNOSTIC_STAGES",
+    "NAVIGATOR_METHOD",
+    "OdometryRun",
+    "diagnostic_row",
+    "make_tracker",
+    "run_sequence",
+]
 
 log = logging.getLogger(__name__)
 
@@ -40,9 +49,15 @@ class OdometryRun:
         Methods with a smoother (``relnav``) give their smoothed trajectory here; the online
         per-frame poses stay in ``steps[k].pose``.
     steps : list[OdometryStep]
-        Per-frame details.
+        Per-frame details (empty when the run streamed to disk with ``keep_steps=False``).
     options : dict
         The options the run used (method options, motion prior, initial pose source).
+    used_prior : (N,) bool
+        Frames that kept the motion prior.
+    frame_time_s : (N,) float64
+        Wall-clock seconds per frame.
+    paths : dict[str, Path]
+        Files already written by a streamed run (``estimate``, ``diagnostics``).
     """
 
     method: str
@@ -50,65 +65,158 @@ class OdometryRun:
     poses: np.ndarray
     steps: list[OdometryStep] = field(repr=False, default_factory=list)
     options: dict[str, Any] = field(default_factory=dict)
+    used_prior: np.ndarray | None = field(repr=False, default=None)
+    frame_time_s: np.ndarray | None = field(repr=False, default=None)
+    paths: dict[str, Path] = field(default_factory=dict)
 
     @property
     def n_flagged(self) -> int:
         """Frames whose registration was not ``ok`` (they kept the motion prior)."""
+        if self.used_prior is not None:
+            return int(np.count_nonzero(self.used_prior))
         return sum(s.used_prior for s in self.steps)
+
+    def _times(self) -> list[float]:
+        if self.frame_time_s is not None:
+            return [float(t) for t in self.frame_time_s[1:]]
+        return [s.time_s for s in self.steps[1:]]
 
     @property
     def mean_time_ms(self) -> float:
         """Mean wall-clock time per registered frame (first frame excluded), ms."""
-        times = [s.time_s for s in self.steps[1:]]
+        times = self._times()
         return 1000.0 * float(np.mean(times)) if times else float("nan")
 
     @property
     def median_time_ms(self) -> float:
         """Median wall-clock time per registered frame, ms (robust to one-off JIT compilation)."""
-        times = [s.time_s for s in self.steps[1:]]
+        times = self._times()
         return 1000.0 * float(np.median(times)) if times else float("nan")
 
     def diagnostics(self) -> list[dict[str, Any]]:
         """One row per frame: points, correspondences, inliers, status, stage times (ms)."""
-        rows = []
-        for i, (t, s) in enumerate(zip(self.timestamps, self.steps, strict=True)):
-            r = s.result
-            row: dict[str, Any] = {
-                "frame": i,
-                "time": float(t),
-                "n_points": s.n_points,
-                "n_correspondences": r.n_correspondences if r else 0,
-                "n_inliers": r.n_inliers if r else 0,
-                "status": s.status,
-                "used_prior": int(s.used_prior),
-                "fitness": round(r.fitness, 6) if r else "",
-                "inlier_rmse": r.inlier_rmse if r else "",
-            }
-            timings = r.timings if r else {}
-            for stage in DIAGNOSTIC_STAGES:
-                row[f"t_{stage}_ms"] = 1000.0 * timings.get(stage, 0.0)
-            extra = sorted(set(timings) - set(DIAGNOSTIC_STAGES))
-            row["t_other_ms"] = 1000.0 * sum(timings[k] for k in extra)
-            row["t_frame_ms"] = 1000.0 * s.time_s
-            row["message"] = r.message if r else ""
-            rows.append(row)
-        return rows
+        if not self.steps and "diagnostics" in self.paths and len(self.timestamps):
+            with self.paths["diagnostics"].open(newline="") as f:
+                return list(csv.DictReader(f))
+        return [
+            diagnostic_row(i, t, s)
+            for i, (t, s) in enumerate(zip(self.timestamps, self.steps, strict=True))
+        ]
 
     def write(self, out_dir: str | Path) -> dict[str, Path]:
-        """Write ``estimate.tum`` and ``diagnostics.csv`` into ``out_dir``; returns the paths."""
-        from relnav.io.trajectories import write_tum
-
+        """Write ``estimate.tum`` and ``diagnostics.csv`` into ``out_dir`` (atomically: a
+        temporary name, then a rename); returns the paths."""
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        est = out / "estimate.tum"
-        write_tum(est, self.timestamps, self.poses)
-        diag = out / "diagnostics.csv"
+        if self.paths and all(p.parent.resolve() == out.resolve() for p in self.paths.values()):
+            return dict(self.paths)  # streamed there already
         rows = self.diagnostics()
-        with diag.open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["frame"])
-            w.writeheader()
-            w.writerows(rows)
-        return {"estimate": est, "diagnostics": diag}
+        with _RunWriter(out) as w:
+            for t, T, row in zip(self.timestamps, self.poses, rows, strict=True):
+                w.add(float(t), T, row)
+        return w.paths
+
+
+def diagnostic_row(i: int, t: float, s: OdometryStep) -> dict[str, Any]:
+    """The ``diagnostics.csv`` row of frame ``i`` (time ``t``, s) from its step."""
+    r = s.result
+    row: dict[str, Any] = {
+        "frame": i,
+        "time": float(t),
+        "n_points": s.n_points,
+        "n_correspondences": r.n_correspondences if r else 0,
+        "n_inliers": r.n_inliers if r else 0,
+        "status": s.status,
+        "used_prior": int(s.used_prior),
+        "fitness": round(r.fitness, 6) if r else "",
+        "inlier_rmse": r.inlier_rmse if r else "",
+    }
+    timings = r.timings if r else {}
+    for stage in DIAGNOSTIC_STAGES:
+        row[f"t_{stage}_ms"] = 1000.0 * timings.get(stage, 0.0)
+    extra = sorted(set(timings) - set(DIAGNOSTIC_STAGES))
+    row["t_other_ms"] = 1000.0 * sum(timings[k] for k in extra)
+    row["t_frame_ms"] = 1000.0 * s.time_s
+    row["message"] = r.message if r else ""
+    return row
+
+
+DIAGNOSTIC_COLUMNS = (
+    "frame",
+    "time",
+    "n_points",
+    "n_correspondences",
+    "n_inliers",
+    "status",
+    "used_prior",
+    "fitness",
+    "inlier_rmse",
+    *(f"t_{stage}_ms" for stage in DIAGNOSTIC_STAGES),
+    "t_other_ms",
+    "t_frame_ms",
+    "message",
+)
+"""Columns of ``diagnostics.csv``, in order."""
+
+
+class _RunWriter:
+    """Stream ``estimate.tum`` and ``diagnostics.csv`` rows to temporary files as frames come
+    (memory stays flat), renamed to their final names by :meth:`close` (a killed run leaves
+    no file a later run trusts)."""
+
+    def __init__(self, out_dir: str | Path) -> None:
+        from relnav.io.atomic import remove_stale_temps, temp_name
+
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.paths = {
+            "estimate": self.out / "estimate.tum",
+            "diagnostics": self.out / "diagnostics.csv",
+        }
+        for p in self.paths.values():
+            remove_stale_temps(p)
+        self._tmp = {k: temp_name(p) for k, p in self.paths.items()}
+        self._est = self._tmp["estimate"].open("w", encoding="ascii")
+        self._diag = self._tmp["diagnostics"].open("w", newline="")
+        self._csv = csv.DictWriter(self._diag, fieldnames=list(DIAGNOSTIC_COLUMNS))
+        self._csv.writeheader()
+
+    def add(self, t: float, pose: np.ndarray, row: dict[str, Any]) -> None:
+        """Append one frame (time s, ``T_world_sensor``, diagnostics row) and flush."""
+        from relnav.geometry.rotations import matrix_to_quat
+
+        q = matrix_to_quat(np.asarray(pose, dtype=np.float64)[:3, :3]).reshape(4)
+        vals = [float(t), *np.asarray(pose, dtype=np.float64)[:3, 3].tolist(), *q.tolist()]
+        self._est.write(" ".join(map(repr, vals)) + "\n")
+        self._csv.writerow(row)
+        self._est.flush()
+        self._diag.flush()
+
+    def close(self) -> None:
+        """Fsync and rename the files to their final names."""
+        import os
+
+        for f in (self._est, self._diag):
+            f.flush()
+            os.fsync(f.fileno())
+            f.close()
+        for k, p in self.paths.items():
+            os.replace(self._tmp[k], p)
+
+    def abort(self) -> None:
+        """Close and delete the temporary files."""
+        for f in (self._est, self._diag):
+            f.close()
+        for tmp in self._tmp.values():
+            tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> _RunWriter:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 NAVIGATOR_METHOD = "relnav"
@@ -142,9 +250,14 @@ def run_sequence(
     max_frames: int | None = None,
     progress: Callable[[int, OdometryStep], None] | None = None,
     blas_threads: int | None = 1,
+    out: str | Path | None = None,
+    keep_steps: bool = True,
+    strict: bool = False,
     **method_options: Any,
 ) -> OdometryRun:
     """Run frame-to-frame odometry over ``sequence``.
+
+    Every option is validated before the first frame (:class:`relnav.errors.ConfigError`).
 
     Parameters
     ----------
@@ -152,49 +265,94 @@ def run_sequence(
         E.g. a :class:`relnav.io.ScanSequence`; its ``gt_poses`` (if any) give the initial pose.
     method : str or Registration
         Registration method (``relnav methods`` lists them).
-    initial_pose : (4, 4) array, "gt" or None
+    initial_pose : (4, 4) array, "gt", "identity" or None
         ``"gt"``: the ground truth's first pose when the sequence has one, else the identity.
     motion_prior : {"constant_velocity", "identity"}
         Step kept by frames whose registration is degenerate or failed.
     max_frames : int, optional
-        Stop after this many frames.
+        Stop after this many frames (>= 0).
     progress : callable, optional
         Called as ``progress(i, step)`` after each frame (the CLI draws its progress bar with it).
     blas_threads : int or None
         BLAS threads during the run (default 1: small per-frame linear algebra is slower
         multi-threaded; see :mod:`relnav._threads`). ``None`` leaves the setting alone.
+    out : str or Path, optional
+        Stream ``estimate.tum`` and ``diagnostics.csv`` into this folder as frames come
+        (temporary names, renamed when the run ends).
+    keep_steps : bool
+        Keep every :class:`OdometryStep` in memory (``False`` with ``out`` keeps memory flat
+        over long runs: only poses, times and flags stay).
+    strict : bool
+        An unreadable scan (:class:`relnav.errors.InputError`) aborts the run. By default the
+        frame is flagged ``failed`` with the reason and the run goes on.
     **method_options
-        Passed to the registration factory.
+        Passed to the registration factory; ``gate_rotation_deg``/``gate_translation`` go to
+        :class:`Odometry`.
 
     Returns
     -------
     OdometryRun
     """
-    n = len(sequence) if max_frames is None else min(len(sequence), int(max_frames))
-    gt = getattr(sequence, "gt_poses", None)
+    from relnav.odometry.options import check_max_frames, parse_initial_pose
+
+    max_frames = check_max_frames(max_frames)
+    initial_pose = parse_initial_pose(initial_pose)
+    n = len(sequence) if max_frames is None else min(len(sequence), max_frames)
     if isinstance(initial_pose, str):
-        T0 = np.asarray(gt[0], dtype=float) if (initial_pose == "gt" and gt is not None) else None
+        gt = getattr(sequence, "gt_poses", None)
+        T0 = np.asarray(gt[0], dtype=float) if (gt is not None and len(gt)) else None
         init_source = "gt" if T0 is not None else "identity"
     else:
-        T0 = None if initial_pose is None else np.asarray(initial_pose, dtype=float)
+        T0 = initial_pose
         init_source = "given" if T0 is not None else "identity"
     odo = make_tracker(method, initial_pose=T0, motion_prior=motion_prior, **method_options)
     steps: list[OdometryStep] = []
     times = np.zeros(n)
-    with limit_blas_threads(blas_threads):
-        for i in range(n):
-            scan = sequence[i]
-            times[i] = scan.time if isinstance(scan, Scan) else float(i)
-            step = odo.register_frame(scan)
-            steps.append(step)
-            if progress is not None:
-                progress(i, step)
-    poses = np.stack([s.pose for s in steps]) if steps else np.zeros((0, 4, 4))
+    poses = np.zeros((n, 4, 4))
+    used_prior = np.zeros(n, dtype=bool)
+    frame_time = np.zeros(n)
+    writer = _RunWriter(out) if out is not None else None
+    try:
+        with limit_blas_threads(blas_threads):
+            for i in range(n):
+                try:
+                    scan = sequence[i]
+                except InputError as e:
+                    skip = getattr(odo, "skip_frame", None)  # any odometry offering it
+                    if strict or skip is None:
+                        raise
+                    times[i] = _scan_time(sequence, i, times[i - 1] if i else 0.0)
+                    step = skip(f"unreadable scan: {e}")
+                else:
+                    times[i] = scan.time if isinstance(scan, Scan) else float(i)
+                    step = odo.register_frame(scan)
+                poses[i] = step.pose
+                used_prior[i] = step.used_prior
+                frame_time[i] = step.time_s
+                if keep_steps:
+                    steps.append(step)
+                if writer is not None:
+                    writer.add(times[i], step.pose, diagnostic_row(i, times[i], step))
+                if progress is not None:
+                    progress(i, step)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
     finalize = getattr(odo, "finalize", None)
-    if callable(finalize) and steps:  # e.g. the navigator's fixed-lag smoother
-        smoothed = np.asarray(finalize(), dtype=float)
-        if smoothed.shape == poses.shape and np.all(np.isfinite(smoothed)):
-            poses = smoothed
+    smoothed = False
+    if callable(finalize) and n:  # e.g. the navigator's fixed-lag smoother
+        final = np.asarray(finalize(), dtype=float)
+        if final.shape == poses.shape and np.all(np.isfinite(final)):
+            poses, smoothed = final, True
+    paths: dict[str, Path] = {}
+    if writer is not None:
+        writer.close()
+        paths = dict(writer.paths)
+        if smoothed:  # the streamed rows were the online poses: the file gets the final ones
+            from relnav.io.trajectories import write_tum
+
+            write_tum(paths["estimate"], times, poses)
     name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
     run = OdometryRun(
         name,
@@ -206,7 +364,19 @@ def run_sequence(
             "initial_pose": init_source,
             "method_options": method_options,
         },
+        used_prior=used_prior,
+        frame_time_s=frame_time,
+        paths=paths,
     )
     if run.n_flagged:
         log.info("%d of %d frames kept the motion prior", run.n_flagged, n)
     return run
+
+
+def _scan_time(sequence: Sequence[Scan], i: int, previous: float) -> float:
+    """Time of scan ``i`` without reading it (its file may be unreadable), seconds."""
+    stamps = getattr(sequence, "timestamps", None)
+    try:
+        return float(stamps[i]) if stamps is not None else float(i)
+    except (IndexError, TypeError, ValueError):
+        return previous

@@ -17,6 +17,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from relnav.config import check_options, did_you_mean
 from relnav.errors import ConfigError
 from relnav.registration.result import RegistrationResult
 
@@ -96,15 +97,33 @@ def get_registration(method: str, **options: Any) -> Registration:
         Unknown method family or bad spec/options.
     """
     _load_all()
-    prefix, _, spec = method.partition(":")
+    prefix, sep, spec = method.partition(":")
     prefix = prefix.strip().lower()
     if prefix not in _REGISTRY:
         raise ConfigError(
-            f"unknown method {method!r}; families: {', '.join(sorted(_REGISTRY))} "
-            "(see `relnav methods`)"
+            f"unknown method {method!r}{did_you_mean(prefix, _REGISTRY)}; families: "
+            f"{', '.join(sorted(_REGISTRY))} (see `relnav methods`)"
+        )
+    if sep and not spec.strip():
+        raise ConfigError(
+            f"method {method!r}: empty spec after ':'; e.g. {', '.join(_EXAMPLES[prefix])}"
         )
     factory = _REGISTRY[prefix][0]
+    built = _built_class(factory)
+    if built is not None:
+        options = check_options(built, options, where=f"method {method!r}")
     try:
         return factory(spec.strip() or None, **options)
-    except TypeError as e:
+    except (TypeError, ValueError) as e:
         raise ConfigError(f"bad options for method {method!r}: {e}") from None
+
+
+def _built_class(factory: Callable[..., Registration]) -> type | None:
+    """The class a factory returns (its return annotation), whose options are checked."""
+    import typing
+
+    try:
+        ret = typing.get_type_hints(factory).get("return")
+    except Exception:  # unresolvable annotation: the factory checks its own options
+        return None
+    return ret if isinstance(ret, type) else None

@@ -147,12 +147,35 @@ class FeatureRegistration:
         self.radius_from = radius_from
         self.min_points = int(min_points)
         self.descriptor_options = dict(descriptor_options or {})
+        if self.descriptor_options:
+            self._dry_run_descriptor()
         self.refiner = None
         if refine:
             from relnav.registration.base import get_registration
 
             self.refiner = get_registration(refine, **(refine_options or {}))
         self.name = f"feature:{descriptor}+{grouper}+{estimator}"
+
+    def _dry_run_descriptor(self) -> None:
+        """Describe a tiny fixed cloud once so that bad ``descriptor_options`` fail at start
+        (:class:`ConfigError`) instead of flagging every frame."""
+        rng = np.random.default_rng(0)
+        P = rng.normal(size=(32, 3))
+        normals = estimate_normals(P, radius=1.0) if self.descriptor_spec.needs_normals else None
+        try:
+            compute_descriptors(
+                self.descriptor_spec.name,
+                P,
+                radius=1.0,
+                keypoints=np.arange(4),
+                normals=normals,
+                **self.descriptor_options,
+            )
+        except Exception as e:  # any failure here is the options' fault
+            raise ConfigError(
+                f"feature: bad descriptor_options for {self.descriptor_spec.name!r}: "
+                f"{type(e).__name__}: {e}"
+            ) from None
 
     # ------------------------------------------------------------------ per-cloud work
     def prepare(self, points: np.ndarray, *, radius: float | None = None) -> CloudFeatures:
@@ -308,4 +331,36 @@ def _parse_spec(spec: str | None) -> tuple[str, str, str]:
 )
 def _make_feature(spec: str | None, **options: Any) -> FeatureRegistration:
     d, g, e = _parse_spec(spec)
+    _check_nested_options(d, g, e, options)
     return FeatureRegistration(d, g, e, **options)
+
+
+def _check_nested_options(d: str, g: str, e: str, options: dict[str, Any]) -> None:
+    """Check ``descriptor_/grouper_/estimator_options`` before anything runs (ConfigError)."""
+    from relnav.config import check_options
+    from relnav.estimation.base import _REGISTRY as ESTIMATORS
+    from relnav.estimation.base import _load_all as load_estimators
+    from relnav.matching.grouping import _REGISTRY as GROUPERS
+
+    load_estimators()
+    import inspect
+
+    own = set(inspect.signature(FeatureRegistration.__init__).parameters) - {"self"}
+    for key, name, registry in (
+        ("estimator_options", e, ESTIMATORS),
+        ("grouper_options", g, GROUPERS),
+        ("descriptor_options", d, None),
+    ):
+        sub = options.get(key)
+        if sub is None:
+            continue
+        if not isinstance(sub, dict):
+            raise ConfigError(f"feature: {key} must be a mapping of key=value, got {sub!r}")
+        misplaced = sorted(set(sub) & own - {"descriptor", "grouper", "estimator"})
+        if misplaced:
+            raise ConfigError(
+                f"feature: {key}.{misplaced[0]} is an option of the feature method itself "
+                f"(use -O {misplaced[0]}=...)"
+            )
+        if registry is not None and name in registry:
+            check_options(registry[name][0], sub, where=f"feature {key} ({name})")

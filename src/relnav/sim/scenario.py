@@ -52,6 +52,8 @@ from relnav.sim import trajectories as _traj
 from relnav.sim.attitude import make_attitude
 
 __all__ = [
+    "MAX_RAYS_PER_SCAN",
+    "MAX_SIMULATED_FRAMES",
     "AttitudeSpec",
     "PointingSpec",
     "Scenario",
@@ -63,6 +65,7 @@ __all__ = [
     "apply_overrides",
     "default_scenario",
     "load_scenario",
+    "n_simulated",
     "resolve_scenario",
     "scenario_poses",
     "scenario_yaml",
@@ -375,6 +378,8 @@ def load_scenario(
     else:
         source_label = str(source)
         data = load_yaml(source)
+        if not data:
+            raise ConfigError(f"{source}: empty scenario file (no keys)")
     if overrides:
         data = apply_overrides(data, overrides)
     label = label or source_label
@@ -394,17 +399,60 @@ def _build_sensor(spec: SensorSpec) -> Any:
     return sensor
 
 
+MAX_RAYS_PER_SCAN = 10_000_000
+"""Largest ray pattern (or surface sample) per scan a scenario may ask for: each ray costs
+~100 bytes of working memory, so this bounds one scan to ~1 GB (a 128-channel spinning LIDAR
+at 0.1° has 460 800 rays)."""
+
+
+MAX_SIMULATED_FRAMES = 5_000_000
+"""Largest number of frames one simulation may write (its poses alone take ~1 KB per frame);
+longer runs: simulate pieces with ``max_frames``."""
+
+
+def n_simulated(sc: Scenario) -> int:
+    """Frames actually simulated: ``frames``, or ``max_frames`` when smaller."""
+    return sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
+
+
+def _rays_per_scan(sensor: Any) -> tuple[int, str]:
+    """Upper bound on the rays (points) one scan allocates, and the parameter that sets it;
+    computed from the parameters without building the ray pattern."""
+    if hasattr(sensor, "rows") and hasattr(sensor, "cols"):
+        return int(sensor.rows) * int(sensor.cols), "rows x cols"
+    if hasattr(sensor, "image_shape"):
+        r, c = sensor.image_shape
+        return int(r) * int(c), "width x height / decimation^2"
+    if hasattr(sensor, "elevations_deg") and hasattr(sensor, "azimuth_step_deg"):
+        n_az = 360.0 / float(sensor.azimuth_step_deg)
+        return int(min(n_az, 1e18)) * len(sensor.elevations_deg), "elevations x 360/azimuth_step"
+    if hasattr(sensor, "n_points"):
+        return 4 * int(sensor.n_points), "4 x n_points"
+    return 0, ""
+
+
 def _check_scenario(sc: Scenario, label: str) -> None:
     for i, s in enumerate(sc.sensors):
         try:
-            _build_sensor(s)
+            sensor = _build_sensor(s)
         except RelnavError as e:
             raise ConfigError(f"{label}: sensors.{i} ({s.label}): {e}") from None
         except (TypeError, ValueError) as e:
             raise ConfigError(f"{label}: sensors.{i} ({s.label}): bad parameter: {e}") from None
+        n_rays, what = _rays_per_scan(sensor)
+        if n_rays > MAX_RAYS_PER_SCAN:
+            raise ConfigError(
+                f"{label}: sensors.{i} ({s.label}): {n_rays:.3g} rays per scan ({what}) "
+                f"exceeds the limit of {MAX_RAYS_PER_SCAN:.0e}"
+            )
+    if n_simulated(sc) > MAX_SIMULATED_FRAMES:
+        raise ConfigError(
+            f"{label}: {n_simulated(sc)} frames to simulate exceeds the limit of "
+            f"{MAX_SIMULATED_FRAMES} (set max_frames / --max-frames)"
+        )
     try:
         times, pos = _traj.make_trajectory(
-            sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params
+            sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params, n_keep=n_simulated(sc)
         )
     except ConfigError as e:
         raise ConfigError(f"{label}: {e}") from None
@@ -539,8 +587,10 @@ def scenario_poses(sc: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return p.times, p.T_W_rig, p.T_W_target
 
 
-def _poses(sc: Scenario, jitter_ss: np.random.SeedSequence) -> _Poses:
-    times, pos = _traj.make_trajectory(sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params)
+def _poses(sc: Scenario, jitter_ss: np.random.SeedSequence, n_keep: int | None = None) -> _Poses:
+    times, pos = _traj.make_trajectory(
+        sc.trajectory.kind, sc.frames, sc.dt, sc.trajectory.params, n_keep=n_keep
+    )
     T_W_rig = _traj.pointing_poses(
         pos,
         target=sc.pointing.target,
@@ -555,6 +605,43 @@ def _poses(sc: Scenario, jitter_ss: np.random.SeedSequence) -> _Poses:
     T_W_target[:, :3, 3] = -R @ c
     T_W_target[:, 3, 3] = 1.0
     return _Poses(times, T_W_rig, T_W_target)
+
+
+def _check_output_free(out: Path, sc: Scenario, overwrite: bool) -> None:
+    """The error :class:`SequenceWriter` would raise for existing scans, raised up front."""
+    from relnav.io.sequences import POINT_READ_EXTENSIONS, sequence_layout
+
+    if overwrite:
+        return
+    for i, spec in enumerate(sc.sensors):
+        d = sequence_layout(out, None if i == 0 else spec.label).scans_dir
+        if d.is_dir():
+            old = [q for q in d.iterdir() if q.suffix.lower() in POINT_READ_EXTENSIONS]
+            if old:
+                raise InputError(
+                    f"{d}: already holds {len(old)} scan files "
+                    "(pass overwrite=True, or --overwrite on the command line, to replace them)"
+                )
+
+
+def _check_target_visible(
+    sc: Scenario, sensors: list[Any], target: Any, T_ts: list[np.ndarray]
+) -> None:
+    """InputError before anything is written when a ray sensor's pattern never comes near
+    the target's bounding sphere (out of range or pointed away in every frame)."""
+    for spec, sensor, T in zip(sc.sensors, sensors, T_ts, strict=True):
+        candidates = getattr(sensor, "_candidate_rays", None)
+        if candidates is None:
+            continue
+        for k in range(len(T)):
+            c = candidates(target, T[k])
+            if c is not None and len(c):
+                break
+        else:
+            raise InputError(
+                f"sensor {spec.label} saw nothing of the target in any of the {len(T)} frames "
+                "(out of range or field of view): check range/FOV/trajectory (nothing written)"
+            )
 
 
 def simulate(
@@ -592,6 +679,7 @@ def simulate(
         Invalid scenario, missing mesh, existing output; a sensor that saw nothing of the
         target in any frame (:class:`InputError`).
     """
+    from relnav.io.atomic import atomic_write_text
     from relnav.io.sequences import SequenceWriter
     from relnav.sim.targets import get_target
 
@@ -603,18 +691,28 @@ def simulate(
     if target is None:
         target = get_target(sc.target.spec, seed=sc.target.seed, scale_to=sc.target.scale_to)
     sensors = [_build_sensor(s) for s in sc.sensors]
-    poses = _poses(sc, children[0])
+    n_sim = n_simulated(sc)
+    # only the simulated frames are computed (the first n_sim of the whole path, identical
+    # values); spawn(k) gives the first k children of spawn(frames)
+    poses = _poses(sc, children[0], n_sim)
     T_target_W = invert(poses.T_W_target)
     T_ts = [T_target_W @ poses.T_W_rig @ s.T_rig_sensor for s in sc.sensors]
-    frame_ss = [children[2 + i].spawn(sc.frames) for i in range(len(sc.sensors))]
+    frame_ss = [children[2 + i].spawn(n_sim) for i in range(len(sc.sensors))]
     resolved = resolve_scenario(sc)
+    _check_target_visible(sc, sensors, target, T_ts)
     timings["setup"] = time.perf_counter() - t0
 
     n_sensors = len(sc.sensors)
-    n_sim = sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
     counts = np.zeros((n_sensors, n_sim), dtype=np.int64)
-    writers = []
-    try:
+    writers: list[Any] = []
+    _check_output_free(out, sc, overwrite)
+    # Nothing is written until every sensor has seen the target once: a sensor that never
+    # does fails the run with an empty output folder. Frames before that are buffered (empty
+    # scans cost nothing; a sensor that sees early is buffered only while another does not).
+    pending: list[tuple[int, list[Any]]] = []
+    seen = np.zeros(n_sensors, dtype=bool)
+
+    def open_writers() -> None:
         for i, (spec, sensor) in enumerate(zip(sc.sensors, sensors, strict=True)):
             writers.append(
                 SequenceWriter(
@@ -625,21 +723,44 @@ def simulate(
                     overwrite=overwrite,
                 )
             )
+
+    def write_frame(k: int, scans: list[Any]) -> None:
+        tw = time.perf_counter()
+        for i, pts in enumerate(scans):
+            writers[i].add(pts, float(poses.times[k]), T_ts[i][k])
+        timings["write"] += time.perf_counter() - tw
+
+    try:
         for k in range(n_sim):
+            scans = []
             for i, sensor in enumerate(sensors):
                 ts = time.perf_counter()
                 pts = sensor.scan(target, T_ts[i][k], np.random.default_rng(frame_ss[i][k]))
-                tw = time.perf_counter()
-                writers[i].add(pts, float(poses.times[k]), T_ts[i][k])
-                timings["write"] += time.perf_counter() - tw
-                timings["scan"] += tw - ts
+                timings["scan"] += time.perf_counter() - ts
                 counts[i, k] = len(pts)
+                seen[i] |= len(pts) > 0
+                scans.append(pts)
+            if writers:
+                write_frame(k, scans)
+            else:
+                pending.append((k, scans))
+                if seen.all():
+                    open_writers()
+                    for kk, ss in pending:
+                        write_frame(kk, ss)
+                    pending.clear()
             if progress is not None:
                 progress(k + 1, n_sim)
+        if not seen.all():
+            blind = [spec.label for spec, v in zip(sc.sensors, seen, strict=True) if not v]
+            raise InputError(
+                f"sensor {', '.join(blind)} saw nothing of the target in any of the {n_sim} "
+                "frames: check range/FOV/trajectory (nothing written)"
+            )
         tw = time.perf_counter()
         for w in writers:
             w.close()
-        (out / "scenario.yaml").write_text(scenario_yaml(resolved), encoding="utf-8")
+        atomic_write_text(out / "scenario.yaml", scenario_yaml(resolved))
         timings["write"] += time.perf_counter() - tw
     finally:
         for w in writers:

@@ -20,6 +20,7 @@ state-transition matrix; Paper 1 §3 (Kechagias-Stamatis et al.) for the scenari
 
 from __future__ import annotations
 
+import contextvars
 import inspect
 import logging
 from collections.abc import Callable, Sequence
@@ -80,9 +81,25 @@ def _check_frames(n: int) -> int:
     return int(n)
 
 
+_KEEP: contextvars.ContextVar[int | None] = contextvars.ContextVar("relnav_traj_keep", default=None)
+"""Only the first ``_KEEP`` frames of an ``N``-frame path are computed (set by
+:func:`make_trajectory`'s ``n_keep``): simulating 2 frames of a 1e8-frame path costs nothing."""
+
+
+def _kept(n: int) -> int:
+    keep = _KEEP.get()
+    return n if keep is None else min(n, keep)
+
+
 def _param(n: int) -> np.ndarray:
-    """Normalised path parameter ``u_k = k / (N - 1)`` in ``[0, 1]`` (``[0]`` for one frame)."""
-    return np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    """Normalised path parameter ``u_k = k / (N - 1)`` in ``[0, 1]`` (``[0]`` for one frame);
+    only the first :func:`_kept` values (bit-identical to those of the whole path)."""
+    m = _kept(n)
+    if n <= 1:
+        return np.zeros(1)
+    if m == n:
+        return np.linspace(0.0, 1.0, n)
+    return np.arange(m, dtype=np.float64) * (1.0 / (n - 1))  # = linspace(0, 1, n)[:m]
 
 
 def _fold(u: np.ndarray) -> np.ndarray:
@@ -110,7 +127,7 @@ def frame_times(n_frames: int, dt: float, t0: float = 0.0) -> np.ndarray:
     n = _check_frames(n_frames)
     if not dt > 0:
         raise InputError(f"dt must be > 0 s, got {dt!r}")
-    return t0 + dt * np.arange(n, dtype=np.float64)
+    return t0 + dt * np.arange(_kept(n), dtype=np.float64)
 
 
 # --------------------------------------------------------------------------------------------
@@ -325,7 +342,7 @@ def _approach(n: int, start: float, stop: float, profile: str, axis: int) -> np.
         s = start * (stop / start) ** _param(n)
     else:
         raise InputError(f"approach profile must be 'linear' or 'exponential', got {profile!r}")
-    p = np.zeros((n, 3))
+    p = np.zeros((s.size, 3))
     p[:, axis] = s
     return p
 
@@ -353,7 +370,7 @@ def rbar_approach(
 
 def stationary(n_frames: int, *, position: ArrayLike3 = (-5.0, 0.0, 0.0)) -> np.ndarray:
     """A sensor holding ``position`` (m, ``W``) in every frame (e.g. Paper 2's lab rig)."""
-    return np.tile(_vec3(position, "position"), (_check_frames(n_frames), 1))
+    return np.tile(_vec3(position, "position"), (_kept(_check_frames(n_frames)), 1))
 
 
 # --------------------------------------------------------------------------------------------
@@ -478,12 +495,29 @@ def trajectory_params(kind: str) -> dict[str, Any]:
 
 
 def make_trajectory(
-    kind: str, n_frames: int, dt: float, params: dict[str, Any] | None = None
+    kind: str,
+    n_frames: int,
+    dt: float,
+    params: dict[str, Any] | None = None,
+    *,
+    n_keep: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Frame times ``(N,)`` (s) and positions ``(N, 3)`` (m, ``W``) of trajectory ``kind``.
 
-    Unknown kinds or parameter names raise :class:`ConfigError` listing the accepted ones.
+    ``n_keep`` computes only the first ``n_keep`` frames of the ``n_frames``-frame path
+    (identical values, time and memory independent of ``n_frames``). Unknown kinds or
+    parameter names raise :class:`ConfigError` listing the accepted ones.
     """
+    token = _KEEP.set(None if n_keep is None else max(int(n_keep), 1))
+    try:
+        return _make_trajectory(kind, n_frames, dt, params)
+    finally:
+        _KEEP.reset(token)
+
+
+def _make_trajectory(
+    kind: str, n_frames: int, dt: float, params: dict[str, Any] | None
+) -> tuple[np.ndarray, np.ndarray]:
     params = dict(params or {})
     allowed = trajectory_params(kind)
     unknown = sorted(set(params) - set(allowed))
