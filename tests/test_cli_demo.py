@@ -37,9 +37,8 @@ def test_demo_writes_one_folder_per_method_and_a_narrow_table(tmp_path):
         assert info["flags"]["frames"] == 6
         per = json.loads((folder / "metrics.json").read_text())
         assert per["e_T_avg"] == row["e_T_avg"] and per["time_ms"] is not None
-    ext = json.loads((out / "runs" / "extended" / "run.json").read_text())
-    assert ext["preset"] == "extended" and ext["method"] == "feature:hods+gcc+svd"
-    assert ext["options"]["method_options"]["refine"] == "icp-plane"
+    p1 = json.loads((out / "runs" / "paper1" / "run.json").read_text())
+    assert p1["preset"] == "paper1" and p1["method"] == "feature:hods+gcc+alphabeta"
     # the table fits 80 columns: no cut labels, and a legend for the letters
     lines = res.output.splitlines()
     assert all(len(line) <= 80 for line in lines), max(lines, key=len)

@@ -98,11 +98,23 @@ def test_bad_scan_is_flagged_and_tracking_continues(orbit_seq, bad):
     assert err < 2.0
 
 
-def test_unknown_option_is_a_config_error():
+@pytest.mark.parametrize(
+    ("options", "needle"),
+    [
+        ({"voxel_factr": 0.3}, "did you mean 'voxel_factor'"),
+        ({"kernel": "abc"}, "kernel='abc'"),
+        ({"max_iter": 0}, "must be >= 1"),
+        ({"max_iter": 2.5}, "fractional"),
+        ({"min_overlap": 1.5}, "must be >= 0 and <= 1"),
+        ({"sigma_acc_t": float("nan")}, "NaN"),
+    ],
+)
+def test_bad_option_is_a_config_error(options, needle):
     from relnav.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="unknown option"):
-        Navigator(voxel_factr=0.3)
+    with pytest.raises(ConfigError, match="method 'relnav'") as e:
+        Navigator(**options)
+    assert needle in str(e.value)
 
 
 def test_voxel_map_bounds_and_forgets(rng):
@@ -201,3 +213,21 @@ def test_pose_noise_from_second_differences(rng):
     nt, nr = pose_noise(SimpleNamespace(steps=steps))
     assert 0.035 < nt < 0.07
     assert 0.0014 < nr < 0.0028
+
+
+def test_unreadable_scan_is_flagged_and_the_navigator_goes_on(orbit_seq, tmp_path):
+    import shutil
+
+    from relnav.io.sequences import ScanSequence
+
+    folder = tmp_path / "seq"
+    shutil.copytree(orbit_seq.folder, folder)
+    seq = ScanSequence(folder)
+    bad = seq.files[5]
+    bad.write_bytes(bad.read_bytes()[:40])  # truncated
+    run = run_sequence(ScanSequence(folder), "relnav", max_frames=12)
+    status = [s.status for s in run.steps]
+    assert status[5] == "failed" and "unreadable scan" in run.steps[5].result.message
+    assert all(s == "ok" for k, s in enumerate(status[1:], 1) if k != 5)
+    err = np.linalg.norm((invert(orbit_seq.gt_poses[11]) @ run.poses[11])[:3, 3])
+    assert err < 2.0

@@ -45,11 +45,11 @@ def _odo(base: Path, out: Path, *args: str):
         (["-m", "icp-point", "-O", "gate_rotation_deg=-5"], "greater than 0"),
         (["-m", "icp-point", "-O", "gate_translation=.nan"], "finite"),
         (["-m", "feature:"], "empty spec"),
-        (["-O", "descriptor_options.radius_factor=-1"], "option of the feature method"),
-        (["-O", "descriptor_options.mode=bogus"], "bad descriptor_options"),
-        (["-O", "radius_factor=-1"], "radius_factor=-1 out of range (must be > 0)"),
+        (["-m", "paper1", "-O", "descriptor_options.radius_factor=-1"], "option of the feature"),
+        (["-m", "paper1", "-O", "descriptor_options.mode=bogus"], "bad descriptor_options"),
+        (["-m", "paper1", "-O", "radius_factor=-1"], "radius_factor=-1 out of range (must be > 0)"),
         (["-m", "icp-point", "-O", "max_itr=3"], "did you mean 'max_iter'"),
-        (["-O", "estimator_options.alpha0=0.3"], "did you mean 'alpha'"),
+        (["-m", "paper1", "-O", "estimator_options.alpha0=0.3"], "did you mean 'alpha'"),
         (["-m", "icp-point", "-O", "initial_pose=[1,2,3]"], "16 (4x4) or 12"),
         (["-m", "icp-point", "--motion-prior", "bogus"], "motion_prior"),
         (
@@ -90,7 +90,16 @@ def test_numbers_yaml_leaves_as_strings_are_numbers(base, tmp_path, opt):
 def test_help_example_option_works(base, tmp_path):  # "Also": the --help example
     r = runner.invoke(app, ["odometry", "--help"])
     assert "estimator_options.alpha=0.3" in r.output
-    r = _odo(base, tmp_path / "o", "--max-frames", "2", "-O", "estimator_options.alpha=0.3")
+    r = _odo(
+        base,
+        tmp_path / "o",
+        "-m",
+        "paper1",
+        "--max-frames",
+        "2",
+        "-O",
+        "estimator_options.alpha=0.3",
+    )
     assert r.exit_code == 0, r.output
 
 

@@ -107,6 +107,24 @@ OPTION_RANGES: dict[str, _Range] = {
     "voxel_size": (0, False, None, False),
     "gate_rotation_deg": (0, False, 180, True),
     "gate_translation": (0, False, None, False),
+    # relnav's navigator (relnav.navigation.NavigatorConfig)
+    "voxel_factor": (0, False, None, False),
+    "inplane_sigma": (0, False, None, False),
+    "k_neighbors": (3, True, None, False),
+    "max_voxel_weight": (1, True, None, False),
+    "max_voxels": (1, True, None, False),
+    "kernel": (0, False, None, False),
+    "max_points": (6, True, None, False),
+    "min_overlap": (0, True, 1, True),
+    "chi2_gate": (0, False, None, False),
+    "recover_rms_ratio": (0, False, None, False),
+    "min_degeneracy": (0, True, 1, False),
+    "smooth_lag": (0, True, None, False),
+    "sigma_acc_t": (0, False, None, False),
+    "sigma_acc_r_deg": (0, False, 180, True),
+    "sigma_first_t": (0, False, None, False),
+    "sigma_first_r_deg": (0, False, 180, True),
+    "noise_floor": (0, False, None, False),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""

@@ -10,8 +10,9 @@ from relnav.cli._common import console, progress_bar
 
 DEMO_PRESET = "sim-voyager"
 DEMO_FRAMES = 60
-DEMO_METHODS = ("relnav", "paper1", "extended", "icp-point")
-"""relnav's navigator, paper 1's pipeline as published, its extended HoD-S, plain ICP."""
+DEMO_METHODS = ("relnav", "paper1", "icp-point")
+"""relnav's navigator, paper 1's pipeline as published, plain ICP (``--method extended`` adds
+paper 1's descriptors with relnav's extensions)."""
 DEMO_PEER = "kiss-icp"
 """The best peer of the navigation suite, added to the demo when ``[baselines]`` is installed."""
 
@@ -68,7 +69,7 @@ def demo(
         "--method",
         "-m",
         help="Methods or presets to compare (`relnav methods`); default: relnav, paper1, "
-        "extended, icp-point, and kiss-icp when [baselines] is installed.",
+        "icp-point, and kiss-icp when [baselines] is installed.",
     ),
 ) -> None:
     """Run the whole chain on a built-in scenario (procedural target, ~60 frames).

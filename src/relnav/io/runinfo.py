@@ -130,19 +130,29 @@ def run_info(
         doc["sequence"] = desc
     doc["seed"] = seed
     t: dict[str, float] = {}
-    if run is not None and getattr(run, "steps", None):
+    if run is not None and len(getattr(run, "timestamps", ())):
         import numpy as np
 
-        frame_s = np.array([s.time_s for s in run.steps], dtype=float)
-        t.update(
-            total_s=float(frame_s.sum()),
-            first_frame_s=float(frame_s[0]),
-            median_frame_ms=run.median_time_ms,
-            mean_frame_ms=run.mean_time_ms,
+        steps = getattr(run, "steps", None) or []
+        ft = getattr(run, "frame_time_s", None)
+        frame_s = (
+            np.asarray(ft, dtype=float)
+            if ft is not None
+            else np.array([s.time_s for s in steps], dtype=float)
         )
-        status = Counter(str(s.status) for s in run.steps)
+        if len(frame_s):
+            t.update(
+                total_s=float(frame_s.sum()),
+                first_frame_s=float(frame_s[0]),
+                median_frame_ms=run.median_time_ms,
+                mean_frame_ms=run.mean_time_ms,
+            )
+        if steps:
+            status = Counter(str(s.status) for s in steps)
+        else:  # a streamed run: the statuses are in its diagnostics file
+            status = Counter(str(r.get("status", "")) for r in run.diagnostics())
         doc["flags"] = {
-            "frames": len(run.steps),
+            "frames": len(run.timestamps),
             "flagged": int(run.n_flagged),
             "status": dict(sorted(status.items())),
         }

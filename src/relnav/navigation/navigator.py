@@ -32,7 +32,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -123,7 +123,6 @@ class NavigatorConfig:
     sigma_first_t: float = 5.0
     sigma_first_r_deg: float = 30.0
     noise_floor: float = 0.03
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def _spacing(P: np.ndarray) -> float:
@@ -147,15 +146,9 @@ class Navigator:
     name = "relnav"
 
     def __init__(self, *, initial_pose: np.ndarray | None = None, **options: Any) -> None:
-        known = set(NavigatorConfig.__dataclass_fields__) - {"extra"}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            from relnav.errors import ConfigError
+        from relnav.config import check_options
 
-            raise ConfigError(
-                f"unknown option(s) for method 'relnav': {', '.join(unknown)}; "
-                f"accepted: {', '.join(sorted(known))}"
-            )
+        options = check_options(NavigatorConfig, options, where="method 'relnav'")
         self.config = NavigatorConfig(**options)
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.map: VoxelMap | None = None
@@ -163,6 +156,7 @@ class Navigator:
         self.spacing0 = float("nan")
         self.n_frames = 0
         self._online: list[np.ndarray] = []
+        self._last_dt = 1.0
         self._f0 = 0
         self._rescaled = False
 
@@ -197,6 +191,8 @@ class Navigator:
                 self.motion.sigma_acc = self.motion.sigma_acc / dt
             self._rescaled = True
             self.motion.start_smoothing(self.config.smooth_lag)
+        if np.isfinite(t - self.motion.t) and t > self.motion.t:
+            self._last_dt = t - self.motion.t
         T_pred, P_pp = self.motion.predict(t)
         try:
             result = self._register(P, T_pred, P_pp, timings)
@@ -230,6 +226,29 @@ class Navigator:
             result.status,
             n_raw,
             time.perf_counter() - t_start,
+        )
+
+    def skip_frame(self, reason: str) -> OdometryStep:
+        """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the
+        motion model one frame period ahead (the map is not touched)."""
+        t0 = time.perf_counter()
+        prev = self.pose.copy()
+        if self.motion is not None and self._rescaled:
+            self.motion.predict(self.motion.t + self._last_dt)
+            self.motion.skip()
+            self.pose = self.motion.pose.copy()
+        log.warning("frame %d: skipped (%s)", self.n_frames, reason)
+        self.n_frames += 1
+        self._online.append(self.pose.copy())
+        res = RegistrationResult(T_target_source=self.pose.copy(), status="failed", message=reason)
+        return OdometryStep(
+            self.pose.copy(),
+            invert(prev) @ self.pose,
+            res,
+            True,
+            "failed",
+            0,
+            time.perf_counter() - t0,
         )
 
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
@@ -462,6 +481,4 @@ class Navigator:
 
     def config_dict(self) -> dict[str, Any]:
         """The options in use."""
-        d = asdict(self.config)
-        d.pop("extra", None)
-        return d
+        return asdict(self.config)
