@@ -105,8 +105,16 @@ def test_bad_grids(bad, match):
 
 
 def test_unknown_method_family_is_a_config_error():
-    with pytest.raises(ConfigError, match="unknown family"):
+    with pytest.raises(ConfigError, match="grid method 'warp-drive': unknown method"):
         expand_jobs(load_grid({"scenarios": ["sim-bennu"], "methods": ["warp-drive"]}))
+
+
+def test_grid_accepts_the_navigator_and_presets():
+    grid = load_grid({"scenarios": ["sim-bennu"], "methods": ["relnav", "extended"]})
+    jobs = expand_jobs(grid)
+    assert {j.method for j in jobs} == {"relnav", "feature:hods+gcc+svd"}
+    ext = next(j for j in jobs if j.method.startswith("feature"))
+    assert ext.options["refine"] == "icp-plane"
 
 
 def test_job_ids_are_content_hashes():

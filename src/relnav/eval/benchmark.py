@@ -562,16 +562,15 @@ def expand_jobs(grid: GridSpec) -> list[Job]:
     For ``sequence`` scenarios the clean level runs once (the first seed) since the data do not
     depend on the seed; nuisance levels run for every seed.
     """
-    from relnav.registration import available_methods
+    from relnav.odometry.presets import resolve_method
 
-    families = available_methods()
-    for m in grid.methods:
-        prefix = m.method.partition(":")[0].strip().lower()
-        if prefix not in families:
-            raise ConfigError(
-                f"grid method {m.method!r}: unknown family {prefix!r}; families: "
-                f"{', '.join(families)} (see `relnav methods`)"
-            )
+    resolved: dict[int, tuple[str, dict[str, Any]]] = {}
+    for i, m in enumerate(grid.methods):
+        try:  # method strings, relnav's navigator and named presets (expanded here)
+            name, opts, _ = resolve_method(m.method, dict(m.options))
+        except ConfigError as e:
+            raise ConfigError(f"grid method {m.method!r}: {e}") from None
+        resolved[i] = (name, opts)
     jobs: list[Job] = []
     levels = grid.nuisance_levels()
     for entry in grid.scenarios:
@@ -589,8 +588,9 @@ def expand_jobs(grid: GridSpec) -> list[Job]:
                 else:
                     base = f"{folder}/seed{seed}"
                 seq = base if lv.is_identity else f"{folder}/seed{seed}-{lv.key}"
-                for m in grid.methods:
-                    jid = job_id(spec, seed, act, m.method, m.options)
+                for i, m in enumerate(grid.methods):
+                    method, options = resolved[i]
+                    jid = job_id(spec, seed, act, method, options)
                     jobs.append(
                         Job(
                             jid,
@@ -600,9 +600,9 @@ def expand_jobs(grid: GridSpec) -> list[Job]:
                             int(seed),
                             act,
                             lv.label,
-                            m.method,
+                            method,
                             m.name,
-                            dict(m.options),
+                            dict(options),
                             seq,
                             base,
                             grid.warmup_frames,
