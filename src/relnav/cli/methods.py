@@ -8,17 +8,27 @@ import typer
 
 from relnav.cli._common import console
 
-_EXTRA_MODULES = {"baselines": ("open3d", "kiss_icp", "small_gicp")}
+_EXTRA_MODULES = {"baselines": ("open3d", "kiss_icp", "small_gicp", "kiss_matcher")}
+# the module a method of an extra actually imports (method prefix -> module)
+_METHOD_MODULES = {
+    "o3d-": "open3d",
+    "kiss-icp": "kiss_icp",
+    "small-gicp": "small_gicp",
+    "kiss-matcher": "kiss_matcher",
+}
 
 
-def _extra_available(extra: str | None) -> bool:
+def _extra_available(extra: str | None, method: str = "") -> bool:
     if extra is None:
         return True
-    return all(importlib.util.find_spec(m) is not None for m in _EXTRA_MODULES.get(extra, ()))
+    mods = [m for p, m in _METHOD_MODULES.items() if method.startswith(p)]
+    mods = mods or list(_EXTRA_MODULES.get(extra, ()))
+    return all(importlib.util.find_spec(m) is not None for m in mods)
 
 
 def methods() -> None:
     """List registration methods, descriptors, groupers and estimators."""
+    from rich.markup import escape
     from rich.table import Table
 
     from relnav.estimation import available_estimators
@@ -29,9 +39,15 @@ def methods() -> None:
     t = Table(title="registration methods (use with `relnav odometry --method`)")
     for col in ("method", "description", "available"):
         t.add_column(col)
-    for meta in available_methods().values():
-        ok = _extra_available(meta["extra"])
-        avail = "yes" if ok else f"[yellow]needs pip install 'relnav[{meta['extra']}]'[/]"
+    for name, meta in available_methods().items():
+        extra = meta["extra"]
+        ok = _extra_available(extra, name)
+        if extra is None:
+            avail = "yes"
+        elif ok:
+            avail = escape(f"yes [{extra}]")
+        else:
+            avail = f"[yellow]{escape(f'needs pip install relnav[{extra}]')}[/]"
         t.add_row(", ".join(meta["examples"]), meta["description"], avail)
     console.print(t)
     parts = Table(title="parts of feature:<descriptor>+<grouper>+<estimator>")
