@@ -104,15 +104,17 @@ def count_fpfh_keypoints(points: np.ndarray, normal_radius: float, fpfh_radius: 
     tree = cKDTree(P)
     rf = fpfh_radius * _SHRINK
     rn = min(normal_radius, fpfh_radius) * _SHRINK
-    nbr_f = tree.query_ball_point(P, rf)
-    n_f = np.fromiter((len(x) for x in nbr_f), dtype=np.int64, count=P.shape[0])
-    n_n = np.fromiter(
-        (len(x) for x in tree.query_ball_point(P, rn)), dtype=np.int64, count=P.shape[0]
-    )
+    n_f = np.asarray(tree.query_ball_point(P, rf, return_length=True), dtype=np.int64)
+    n_n = np.asarray(tree.query_ball_point(P, rn, return_length=True), dtype=np.int64)
     valid = (n_f > 2) & (n_n >= _MIN_VALID)
-    n_valid_nbrs = np.fromiter(
-        (int(valid[x].sum()) for x in nbr_f), dtype=np.int64, count=P.shape[0]
-    )
+    pairs = tree.query_pairs(rf, output_type="ndarray")  # i < j, each pair once
+    n_valid_nbrs = valid.astype(np.int64)  # the point itself
+    n_valid_nbrs += np.bincount(
+        pairs[:, 0], weights=valid[pairs[:, 1]], minlength=P.shape[0]
+    ).astype(np.int64)
+    n_valid_nbrs += np.bincount(
+        pairs[:, 1], weights=valid[pairs[:, 0]], minlength=P.shape[0]
+    ).astype(np.int64)
     return int((valid & (n_valid_nbrs >= _MIN_VALID)).sum())
 
 
