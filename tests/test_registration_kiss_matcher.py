@@ -171,3 +171,28 @@ def test_listed_with_the_baselines_extra() -> None:
     meta = available_methods()
     for name in ("kiss-matcher", "kiss-matcher-icp"):
         assert meta[name]["extra"] == "baselines"
+
+
+def test_relnav_methods_shows_the_extra(monkeypatch) -> None:
+    from typer.testing import CliRunner
+
+    from relnav.cli import methods as cli_methods
+    from relnav.cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "200")
+    res = CliRunner().invoke(app, ["methods"])
+    assert res.exit_code == 0, res.output
+    line = next(ln for ln in res.output.splitlines() if "kiss-matcher-icp" in ln)
+    assert "yes [baselines]" in line
+    # without the module the row names the extra to install (and the other adapters stay usable)
+    real = cli_methods.importlib.util.find_spec
+    monkeypatch.setattr(
+        cli_methods.importlib.util,
+        "find_spec",
+        lambda m, *a: None if m == "kiss_matcher" else real(m, *a),
+    )
+    assert not cli_methods._extra_available("baselines", "kiss-matcher")
+    assert cli_methods._extra_available("baselines", "kiss-icp")
+    res = CliRunner().invoke(app, ["methods"])
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("│ kiss-matcher "))
+    assert "needs pip install relnav[baselines]" in line
