@@ -179,7 +179,7 @@ def test_relnav_methods_shows_the_extra(monkeypatch) -> None:
     from relnav.cli import methods as cli_methods
     from relnav.cli.main import app
 
-    monkeypatch.setenv("COLUMNS", "200")
+    monkeypatch.setattr(cli_methods.console, "width", 250)  # one table row per line
     res = CliRunner().invoke(app, ["methods"])
     assert res.exit_code == 0, res.output
     line = next(ln for ln in res.output.splitlines() if "kiss-matcher-icp" in ln)
