@@ -31,7 +31,14 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_TARGETS = REPO.parent / "shared" / "data" / "targets"
 LEO_PERIOD_S = 5553.6
 
-PEERS = ["kiss-icp", "small-gicp", "o3d-icp-plane", "o3d-fpfh-ransac"]
+PEERS = [
+    "kiss-icp",
+    "small-gicp",
+    "o3d-icp-plane",
+    "o3d-fpfh-ransac",
+    "kiss-matcher",
+    "kiss-matcher-icp",
+]
 DEFAULT_METHODS = ["relnav", *PEERS, "icp-plane"]
 
 

@@ -57,7 +57,7 @@ def test_error_line_keeps_the_extra_in_brackets(monkeypatch, capsys, tmp_path):
 def test_methods_table_and_help_keep_the_extra(monkeypatch, wide):
     import relnav.cli.methods as methods_mod
 
-    monkeypatch.setattr(methods_mod, "_extra_available", lambda extra: extra is None)
+    monkeypatch.setattr(methods_mod, "_extra_available", lambda extra, method="": extra is None)
     res = runner.invoke(app, ["methods"])
     assert res.exit_code == 0, res.output
     assert "pip install 'relnav[baselines]'" in res.output

@@ -9,13 +9,22 @@ from rich.markup import escape
 
 from relnav.cli._common import console
 
-_EXTRA_MODULES = {"baselines": ("open3d", "kiss_icp", "small_gicp")}
+_EXTRA_MODULES = {"baselines": ("open3d", "kiss_icp", "small_gicp", "kiss_matcher")}
+# the module a method of an extra actually imports (method prefix -> module)
+_METHOD_MODULES = {
+    "o3d-": "open3d",
+    "kiss-icp": "kiss_icp",
+    "small-gicp": "small_gicp",
+    "kiss-matcher": "kiss_matcher",
+}
 
 
-def _extra_available(extra: str | None) -> bool:
+def _extra_available(extra: str | None, method: str = "") -> bool:
     if extra is None:
         return True
-    return all(importlib.util.find_spec(m) is not None for m in _EXTRA_MODULES.get(extra, ()))
+    mods = [m for p, m in _METHOD_MODULES.items() if method.startswith(p)]
+    mods = mods or list(_EXTRA_MODULES.get(extra, ()))
+    return all(importlib.util.find_spec(m) is not None for m in mods)
 
 
 def methods() -> None:
@@ -38,10 +47,15 @@ def methods() -> None:
         "overlap, degeneracy and motion consistency",
         "yes",
     )
-    for meta in available_methods().values():
-        ok = _extra_available(meta["extra"])
-        hint = escape(f"needs pip install 'relnav[{meta['extra']}]'")
-        avail = "yes" if ok else f"[yellow]{hint}[/]"
+    for name, meta in available_methods().items():
+        extra = meta["extra"]
+        if extra is None:
+            avail = "yes"
+        elif _extra_available(extra, name):
+            avail = escape(f"yes [{extra}]")
+        else:
+            hint = escape(f"needs pip install 'relnav[{extra}]'")
+            avail = f"[yellow]{hint}[/]"
         t.add_row(escape(", ".join(meta["examples"])), escape(meta["description"]), avail)
     console.print(t)
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")

@@ -75,6 +75,7 @@ def register_method(
 
 def _load_all() -> None:
     # Importing a family module registers its methods.
+    import relnav.registration.kiss_matcher  # noqa: F401
     from relnav.fusion import cbd, cross_source  # noqa: F401
     from relnav.registration import clgv, external, feature, icp, sparse_icp, super4pcs  # noqa: F401
 

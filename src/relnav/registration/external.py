@@ -89,7 +89,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_DISTRIBUTIONS = {"open3d": "open3d-cpu", "kiss_icp": "kiss-icp", "small_gicp": "small_gicp"}
+_DISTRIBUTIONS = {
+    "open3d": "open3d-cpu",
+    "kiss_icp": "kiss-icp",
+    "small_gicp": "small_gicp",
+    "kiss_matcher": "kiss-matcher",
+}
 
 
 def require(module: str, method: str) -> ModuleType:
