@@ -195,6 +195,19 @@ def holdout() -> dict[str, dict[str, Any]]:
     return _finish(s)
 
 
+PAPER_PRESETS = ("sim-eoi", "sim-helical", "sim-voyager", "sim-orion", "sim-bennu")
+
+
+def paper(max_frames: int = 60) -> dict[str, dict[str, Any]]:
+    """Paper 1's five HPR presets, their first ``max_frames`` frames (as in the grid)."""
+    from relnav.sim.presets import get_preset
+
+    return {
+        name: get_preset(name, max_frames=max_frames).model_dump(mode="json")
+        for name in PAPER_PRESETS
+    }
+
+
 def _finish(s: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     for name, sc in s.items():
         sc.setdefault("name", name)
@@ -233,7 +246,7 @@ def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
     from relnav.sim.scenario import simulate
 
     folders = {}
-    every = {**suite(), **holdout()}
+    every = {**suite(), **holdout(), **paper()}
     for name in names:
         d = out / "sequences" / name
         if not (d / "scenario.yaml").exists():
@@ -296,7 +309,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS))
     p.add_argument("--json", type=Path, default=None)
-    p.add_argument("--holdout", action="store_true", help="the held-out sequences instead")
+    p.add_argument(
+        "--holdout", action="store_true", help="the held-out sequences instead of the suite"
+    )
     p.add_argument("--write-configs", type=Path, default=None, help="write scenario YAMLs")
     p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
@@ -306,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
         for path in write_configs(a.write_configs):
             print(path)
         return 0
-    pool = holdout() if a.holdout else suite()
+    pool = holdout() if a.holdout else {**suite(), **paper()}
     names = [n for n in pool if not a.only or any(s in n for s in a.only.split(","))]
     folders = simulate_suite(a.out, names)
     methods = [m for m in a.methods.split(",") if m]

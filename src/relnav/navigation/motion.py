@@ -141,8 +141,9 @@ class ConstantVelocityFilter:
 
     # ------------------------------------------------------------------ fixed-lag smoothing
     def start_smoothing(self, lag: int) -> None:
-        """Keep the last ``lag`` frames and smooth each one when it leaves the window
-        (Rauch–Tung–Striebel on the error state); ``lag=0`` turns smoothing off."""
+        """Smooth every frame with at least ``lag`` later frames (Rauch–Tung–Striebel on the
+        error state, run over windows of ``2·lag`` frames every ``lag`` frames); ``lag=0``
+        turns smoothing off."""
         self.lag = int(lag)
         self._hist = [{"T": self.pose.copy(), "v": self.velocity.copy(), "P": self.P.copy()}]
 
@@ -160,9 +161,9 @@ class ConstantVelocityFilter:
                 "F": self._F,
             }
         )
-        if len(self._hist) > self.lag + 1:
-            self.smoothed.append(self._smooth_window()[0])
-            del self._hist[0]
+        if len(self._hist) > 2 * self.lag + 1:  # emit the oldest lag frames (amortised cost)
+            self.smoothed.extend(self._smooth_window()[: self.lag])
+            del self._hist[: self.lag]
 
     def _smooth_window(self) -> list[np.ndarray]:
         """RTS backward pass over the window; smoothed poses, oldest first."""

@@ -65,13 +65,18 @@ class NavigatorConfig:
         Bound on the map size (least recently seen voxels dropped).
     kernel : float
         Geman–McClure scale on the Mahalanobis distance to a voxel (σ units).
+    kernel_start, kernel_decay : float
+        Graduated non-convexity: the scale starts at ``kernel_start`` and is multiplied by
+        ``kernel_decay`` each iteration until it reaches ``kernel``.
     max_iter : int
         Gauss–Newton iterations per frame.
     min_points : int
         Scans with fewer finite points are ``failed``.
     max_points : int
-        Point budget: larger scans are reduced to an evenly spaced subset (in scan order) of
-        this size, for the registration and the map.
+        Point budget of the registration: larger scans are reduced to an evenly spaced subset
+        (in scan order) of this size.
+    max_map_points : int
+        Point budget of the map update (the same kind of subset of the registered points).
     min_overlap : float
         Smallest fraction of scan points with a map voxel within the gate for an ``ok`` step.
     chi2_gate : float
@@ -109,9 +114,12 @@ class NavigatorConfig:
     max_voxel_weight: float = 20.0
     max_voxels: int = 200_000
     kernel: float = 3.0
+    kernel_start: float = 100.0
+    kernel_decay: float = 0.6
     max_iter: int = 30
     min_points: int = 6
-    max_points: int = 400
+    max_points: int = 1500
+    max_map_points: int = 1500
     min_overlap: float = 0.3
     chi2_gate: float = 100.0
     recover_rms_ratio: float = 1.5
@@ -123,6 +131,13 @@ class NavigatorConfig:
     sigma_first_t: float = 5.0
     sigma_first_r_deg: float = 30.0
     noise_floor: float = 0.03
+
+
+def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
+    """At most ``budget`` points, evenly spaced in scan order (all when there are fewer)."""
+    if len(P) <= budget:
+        return P
+    return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
 
 
 def _spacing(P: np.ndarray) -> float:
@@ -171,9 +186,7 @@ class Navigator:
         P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
-        budget = self.config.max_points
-        if len(P) > budget:  # point budget: an evenly spaced subset (in scan order)
-            P = P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
+        P = _even_subset(P, self.config.max_points)
         timings: dict[str, float] = {}
 
         if self.map is None:  # first usable frame builds the map
@@ -210,7 +223,8 @@ class Navigator:
                 self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
             ts = time.perf_counter()
-            self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+            Pm = _even_subset(P, self.config.max_map_points)
+            self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             timings["map"] = time.perf_counter() - ts
         else:
             self.motion.skip()
@@ -277,7 +291,8 @@ class Navigator:
             inplane_sigma=c.inplane_sigma * self.spacing0,
             k_neighbors=c.k_neighbors,
         )
-        self.map.insert(P @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+        Pm = _even_subset(P, c.max_map_points)
+        self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
         radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
         st0 = c.sigma_first_t * max(radius, self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
@@ -435,6 +450,8 @@ class Navigator:
             int(c.max_iter),
             1e-4 * v,
             1e-4 * v / max(rng, 1.0),
+            c0=float(c.kernel_start),
+            decay=float(c.kernel_decay),
         )
         n = len(P)
         has = fit.d2 >= 0
