@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import simulate_suite  # noqa: E402
+from nav_suite import simulate_suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 
