@@ -28,29 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from relnav.registration.icp import _kd_query
+from relnav.registration.icp import _kd_query, _rodrigues_nb
 
 __all__ = ["ScanToMapFit", "solve_scan_to_map"]
-
-
-@njit(cache=True)
-def _rodrigues(w0: float, w1: float, w2: float) -> np.ndarray:  # pragma: no cover - numba
-    th = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    R = np.eye(3)
-    if th < 1e-12:
-        R[0, 1], R[0, 2], R[1, 2] = -w2, w1, -w0
-        R[1, 0], R[2, 0], R[2, 1] = w2, -w1, w0
-        return R
-    k0, k1, k2 = w0 / th, w1 / th, w2 / th
-    s, c1 = math.sin(th), 1.0 - math.cos(th)
-    K = np.zeros((3, 3))
-    K[0, 1], K[0, 2], K[1, 2] = -k2, k1, -k0
-    K[1, 0], K[2, 0], K[2, 1] = k2, -k1, k0
-    for a in range(3):
-        for b in range(3):
-            kk = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
-            R[a, b] += s * K[a, b] + c1 * kk
-    return R
 
 
 @njit(cache=True)
@@ -227,7 +207,7 @@ def _solve_loop(
                 s += Lam[p, q] * xi[q]
             b[p] = -s
         delta = _solve6(A, b)
-        R = _rodrigues(delta[3], delta[4], delta[5])
+        R = _rodrigues_nb(delta[3:].copy())
         Tn = np.eye(4)
         for a in range(3):
             for bb in range(3):
