@@ -303,6 +303,32 @@ def run_method(seq_dir: Path, method: str, **options: Any) -> dict[str, Any]:
     }
 
 
+def markdown_table(results: dict[str, dict[str, Any]]) -> str:
+    """The README's table: relnav beside the best peer per sequence, with the ratios."""
+    head = (
+        "| sequence | relnav APE m | RPE m / ° | wrong steps | ms | best peer APE m (which) | "
+        "best peer RPE m / ° | relnav ÷ best: APE, RPE_t, RPE_r | ÷ KISS-ICP time |\n"
+        "|---|---|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    for seq, res in results.items():
+        r = res.get("relnav", {})
+        peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
+        if "ape" not in r or not peers:
+            continue
+        best = min(peers, key=lambda m: peers[m]["ape"])
+        bt = min(p["rpe_t"] for p in peers.values())
+        br = min(p["rpe_r"] for p in peers.values())
+        kiss = peers.get("kiss-icp", {}).get("ms", float("nan"))
+        rows.append(
+            f"| {seq} | {r['ape']:.2f} | {r['rpe_t']:.3f} / {r['rpe_r']:.2f} | "
+            f"{r['wrong']}/{r['n_steps']} | {r['ms']:.1f} | {peers[best]['ape']:.2f} ({best}) | "
+            f"{bt:.3f} / {br:.2f} | {r['ape'] / peers[best]['ape']:.2f}, {r['rpe_t'] / bt:.2f}, "
+            f"{r['rpe_r'] / br:.2f} | {r['ms'] / kiss:.2f} |"
+        )
+    return head + "\n".join(rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
@@ -364,6 +390,8 @@ def main(argv: list[str] | None = None) -> int:
             )
     if a.json:
         a.json.write_text(json.dumps(results, indent=2))
+    print()
+    print(markdown_table(results))
     return 0
 
 
