@@ -231,3 +231,32 @@ def test_unreadable_scan_is_flagged_and_the_navigator_goes_on(orbit_seq, tmp_pat
     assert all(s == "ok" for k, s in enumerate(status[1:], 1) if k != 5)
     err = np.linalg.norm((invert(orbit_seq.gt_poses[11]) @ run.poses[11])[:3, 3])
     assert err < 2.0
+
+
+def test_fixed_lag_smoother_reduces_the_error_of_noisy_poses(rng):
+    v = np.array([1.0, 0.0, 0.1, 0.0, 0.0, 0.02])
+    f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 2.0), np.full(6, 1e-3))
+    f.start_smoothing(5)
+    truth, filtered = [np.eye(4)], [np.eye(4)]
+    H = np.diag([1 / 0.05**2] * 3 + [1 / 0.002**2] * 3)  # body-frame information of a pose
+    T = np.eye(4)
+    for k in range(1, 60):
+        T = T @ exp_se3(v)
+        meas = T @ exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)])
+        f.predict(float(k))
+        Ad_inv = np.linalg.inv(adjoint(meas))
+        # the filter takes the measurement's own information: the pose itself is the MAP here
+        T_pred = f._pred[0]
+        P_pp = f._pred[1][:6, :6]
+        y = log_se3(invert(T_pred) @ meas)
+        T_map = T_pred @ exp_se3(np.linalg.solve(np.linalg.inv(P_pp) + H, H @ y))
+        f.update(T_map, Ad_inv.T @ H @ Ad_inv)
+        truth.append(T.copy())
+        filtered.append(f.pose.copy())
+    smoothed = f.finish_smoothing()
+    assert len(smoothed) == 60
+
+    def err(P):
+        return np.sqrt(np.mean([np.sum((p[:3, 3] - t[:3, 3]) ** 2) for p, t in zip(P, truth)]))
+
+    assert err(smoothed) < 0.8 * err(filtered)
