@@ -260,3 +260,11 @@ def test_fixed_lag_smoother_reduces_the_error_of_noisy_poses(rng):
         return np.sqrt(np.mean([np.sum((p[:3, 3] - t[:3, 3]) ** 2) for p, t in zip(P, truth)]))
 
     assert err(smoothed) < 0.8 * err(filtered)
+
+
+def test_bootstrap_second_pass_keeps_one_pose_per_frame(orbit_seq):
+    run = run_sequence(orbit_seq, "relnav", max_frames=12, bootstrap_frames=4)
+    assert run.poses.shape == (12, 4, 4) and np.all(np.isfinite(run.poses))
+    assert all(s.status in ("first", "ok") for s in run.steps)
+    err = np.linalg.norm((invert(orbit_seq.gt_poses[11]) @ run.poses[11])[:3, 3])
+    assert err < 2.0

@@ -123,6 +123,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "recover_rms_ratio": (0, False, None, False),
     "min_degeneracy": (0, True, 1, False),
     "smooth_lag": (0, True, None, False),
+    "bootstrap_frames": (0, True, None, False),
     "sigma_acc_t": (0, False, None, False),
     "sigma_acc_r_deg": (0, False, 180, True),
     "sigma_first_t": (0, False, None, False),

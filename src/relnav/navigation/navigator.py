@@ -86,6 +86,11 @@ class NavigatorConfig:
         A step inconsistent with the motion model is registered again under the first frame's
         weak prior and accepted if its robust residual is at most this times the first one's
         (the model, not the scan, was wrong: a manoeuvre or an over-confident velocity).
+    bootstrap_frames : int
+        After this many frames, track them again from the velocity they revealed (once; 0 =
+        off, the default): the first step has no motion prior (see
+        :meth:`Navigator._bootstrap`). Measured on the suite with 5: better on sim-bennu,
+        sim-eoi and orion-inclined-64's wrong steps, worse on iridium-helical-64, so off.
     smooth_lag : int
         Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
         (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
@@ -125,6 +130,7 @@ class NavigatorConfig:
     recover_rms_ratio: float = 1.5
     adaptive_noise: bool = True
     smooth_lag: int = 20
+    bootstrap_frames: int = 0
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -174,6 +180,11 @@ class Navigator:
         self._last_dt = 1.0
         self._f0 = 0
         self._rescaled = False
+        self._initial_pose = self.pose.copy()
+        self._boot: list[tuple[np.ndarray, float, int]] | None = (
+            [] if self.config.bootstrap_frames > 0 else None
+        )
+        self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -187,8 +198,48 @@ class Navigator:
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
         P = _even_subset(P, self.config.max_points)
-        timings: dict[str, float] = {}
+        K = self.config.bootstrap_frames
+        if self._boot is not None:
+            self._boot.append((P, t, n_raw))
+        out = self._track(P, t, n_raw, t_start)
+        if self._boot is not None and len(self._boot) > K and self._rescaled:
+            out = self._bootstrap(out)
+        return out
 
+    def _bootstrap(self, last: OdometryStep) -> OdometryStep:
+        """Track the buffered first frames again, starting with the velocity they revealed.
+
+        **[interpretation]** The first step has no motion prior: on sparse or near-symmetric
+        scans it can settle short of the true motion, and the map and the velocity inherit the
+        error. After ``bootstrap_frames`` frames the filter knows the velocity; the navigator is
+        reset to the first frame and the same scans are tracked again from that velocity (with
+        its covariance, inflated 4×), once. The online steps already returned are not changed;
+        :meth:`finalize` returns the second pass's poses.
+        """
+        assert self.motion is not None and self._boot is not None
+        frames, self._boot = self._boot, None
+        v = self.motion.velocity.copy()
+        P_vv = 4.0 * self.motion.P[6:, 6:].copy()
+        self.map, self.motion = None, None
+        self.pose = self._initial_pose.copy()
+        self.n_frames, self._online, self._rescaled = 0, [], False
+        self._boot_velocity = (v, P_vv)
+        out = last
+        for P, t, n_raw in frames:
+            out = self._track(P, t, n_raw, time.perf_counter())
+        self._boot_velocity = None
+        return OdometryStep(
+            out.pose,
+            out.step,
+            out.result,
+            out.used_prior,
+            out.status,
+            out.n_points,
+            last.time_s + out.time_s,
+        )
+
+    def _track(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
+        timings: dict[str, float] = {}
         if self.map is None:  # first usable frame builds the map
             out = self._first(P, t, n_raw, t_start)
             self.n_frames += 1
@@ -202,6 +253,9 @@ class Navigator:
             if np.isfinite(dt) and dt > 0:
                 self.motion.P[6:, 6:] /= dt**2
                 self.motion.sigma_acc = self.motion.sigma_acc / dt
+            if self._boot_velocity is not None:  # second pass of the first frames
+                self.motion.velocity = self._boot_velocity[0].copy()
+                self.motion.P[6:, 6:] = self._boot_velocity[1]
             self._rescaled = True
             self.motion.start_smoothing(self.config.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
@@ -247,6 +301,7 @@ class Navigator:
         motion model one frame period ahead (the map is not touched)."""
         t0 = time.perf_counter()
         prev = self.pose.copy()
+        self._boot = None  # a gap among the first frames: no second pass
         if self.motion is not None and self._rescaled:
             self.motion.predict(self.motion.t + self._last_dt)
             self.motion.skip()
