@@ -53,6 +53,7 @@ def test_odometry_viz_streams_to_an_rrd_when_headless(tmp_path, rng, monkeypatch
     assert res.exit_code == 0, res.output
     data = (out / "live.rrd").read_bytes()
     assert data[:3] == b"RRF" and b"world/scan" in data and b"world/estimate" in data
+    assert b"world/model" in data  # the model accumulated from the registered scans
     assert "live.rrd" in json.loads((out / "run.json").read_text())["outputs"]
     res = CliRunner().invoke(
         app,

@@ -115,7 +115,10 @@ class LiveViewer:
     """Stream odometry to the Rerun viewer as frames are computed (``relnav odometry --viz``).
 
     Each frame logs the scan in the world frame at its *estimated* pose, the estimated
-    trajectory so far and the sensor position; the ground truth (when known) is logged once.
+    trajectory so far and the sensor position; every ``model_every`` frames, the model of the
+    target accumulated from the registered scans (one point per voxel of ``model_voxel`` metres,
+    default: half the first scan's median spacing) as ``world/model``; the ground truth (when
+    known) is logged once.
     With ``rrd`` the stream goes to that file (headless machines; open it later with
     ``rerun FILE.rrd``); otherwise a viewer is spawned, and when that is impossible (no
     display, no viewer binary) the stream falls back to ``fallback_rrd``.
@@ -132,6 +135,10 @@ class LiveViewer:
         Where to write when no viewer can be spawned.
     max_points : int
         Scans are subsampled (every k-th point) to at most this many points for display.
+    model_every : int
+        Frames between two logs of the accumulated model (0: no model).
+    model_voxel : float, optional
+        Voxel of the displayed model, metres.
     """
 
     def __init__(
@@ -142,6 +149,8 @@ class LiveViewer:
         gt_poses: np.ndarray | None = None,
         fallback_rrd: str | Path | None = None,
         max_points: int = 20000,
+        model_every: int = 10,
+        model_voxel: float | None = None,
     ) -> None:
         import logging
 
@@ -164,6 +173,9 @@ class LiveViewer:
             rr.save(str(self.path))
         self._max_points = int(max_points)
         self._track: list[np.ndarray] = []
+        self._model_every = int(model_every)
+        self._model_voxel = model_voxel
+        self._model: dict[tuple[int, int, int], np.ndarray] = {}
         if gt_poses is not None:
             rr.log("world/ground_truth", rr.LineStrips3D([gt_poses[:, :3, 3]]), static=True)
 
@@ -178,7 +190,26 @@ class LiveViewer:
         rr.log("world/sensor", rr.Points3D(np.asarray(pose)[None, :3, 3], radii=0.05))
         if points is not None and len(points):
             step = max(1, len(points) // self._max_points)
-            rr.log("world/scan", rr.Points3D(transform_points(pose, points[::step]), radii=0.01))
+            world = transform_points(pose, points[::step])
+            rr.log("world/scan", rr.Points3D(world, radii=0.01))
+            if self._model_every > 0:
+                self._accumulate(world)
+        if self._model_every > 0 and self._model and k % self._model_every == 0:
+            rr.log("world/model", rr.Points3D(np.stack(list(self._model.values())), radii=0.02))
+
+    def _accumulate(self, world: np.ndarray) -> None:
+        """Keep the first point of every model voxel (display only)."""
+        world = world[np.all(np.isfinite(world), axis=1)]
+        if not len(world):
+            return
+        if self._model_voxel is None:
+            from relnav.geometry.neighbors import mean_resolution
+
+            res = mean_resolution(world) if len(world) > 1 else 0.0
+            self._model_voxel = 0.5 * res if np.isfinite(res) and res > 0 else 0.05
+        keys = np.floor(world / self._model_voxel).astype(np.int64)
+        for key, p in zip(map(tuple, keys.tolist()), world, strict=True):
+            self._model.setdefault(key, p)
 
     def close(self) -> None:
         """Flush and disconnect."""
