@@ -257,7 +257,9 @@ def test_fixed_lag_smoother_reduces_the_error_of_noisy_poses(rng):
     assert len(smoothed) == 60
 
     def err(P):
-        return np.sqrt(np.mean([np.sum((p[:3, 3] - t[:3, 3]) ** 2) for p, t in zip(P, truth)]))
+        return np.sqrt(
+            np.mean([np.sum((p[:3, 3] - t[:3, 3]) ** 2) for p, t in zip(P, truth, strict=True)])
+        )
 
     assert err(smoothed) < 0.8 * err(filtered)
 
