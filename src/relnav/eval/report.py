@@ -106,7 +106,16 @@ _FILTER_ORDER = ("hinf", "kalman", "alphabeta", "sdre", "svd")
 _PAPER_FILTERS = ("hinf", "kalman", "alphabeta", "sdre")
 _DESC_ORDER = ("hods", "fpfh", "shot", "hod", "rops", "trisi", "spin")
 _COMPETITORS = ("icp-point", "icp-plane", "icp-x84", "s4pcs", "sicp-point", "sicp-plane")
-_BASELINES = ("o3d-fpfh-ransac", "o3d-icp-point", "o3d-icp-plane", "kiss-icp", "small-gicp")
+_BASELINES = (
+    "o3d-fpfh-ransac",
+    "o3d-icp-point",
+    "o3d-icp-plane",
+    "kiss-icp",
+    "small-gicp",
+    "kiss-matcher",
+    "kiss-matcher-icp",
+    "relnav",  # relnav's own navigator: beyond paper 1, reported beside the tools users pick
+)
 _ICP_FAST = ("icp-point", "icp-plane", "icp-x84")
 _DEFAULT_ITER = {"icp-plane": 1000}
 _ITER_KEYS = ("max_iter", "max_icp")
@@ -127,7 +136,8 @@ class MethodInfo:
         Grid label and method string.
     family : str
         ``"feature"``, ``"clgv"``, ``"competitor"`` (Paper 1's six), ``"baseline"`` (the
-        ``[baselines]`` extra) or ``"other"``.
+        ``[baselines]`` extra and relnav's own navigator, methods beyond paper 1) or
+        ``"other"``.
     descriptor, grouper, estimator : str or None
         Parts of ``feature:`` / ``clgv:`` methods.
     iterations : int or None
