@@ -59,3 +59,14 @@ def test_odometry_runs_the_navigator_by_default(tmp_path):
     info = json.loads((out / "run.json").read_text())
     assert info["method"] == "relnav"
     assert len((out / "estimate.tum").read_text().splitlines()) == 4
+    for name in ("state.csv", "state.png", "state_errors.png"):  # the full relative state
+        assert (out / name).is_file(), name
+    assert "state" in json.loads((out / "metrics.json").read_text())
+    quiet = tmp_path / "quiet"
+    res = CliRunner().invoke(app, ["odometry", str(seq), "--out", str(quiet), "--no-state"])
+    assert res.exit_code == 0, res.output
+    assert not (quiet / "state.csv").exists()
+    res = CliRunner().invoke(
+        app, ["odometry", str(seq), "-m", "icp-point", "--out", str(quiet), "--state"]
+    )
+    assert res.exit_code != 0 and "needs the navigator" in str(res.exception)

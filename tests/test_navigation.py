@@ -210,7 +210,7 @@ def test_pose_noise_from_second_differences(rng):
         T = T @ exp_se3(v)
         noisy = T @ exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)])
         steps.append(SimpleNamespace(pose=noisy, status="ok"))
-    nt, nr = pose_noise(SimpleNamespace(steps=steps))
+    nt, nr = pose_noise(steps)
     assert 0.035 < nt < 0.07
     assert 0.0014 < nr < 0.0028
 

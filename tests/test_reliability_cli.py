@@ -88,7 +88,7 @@ def test_numbers_yaml_leaves_as_strings_are_numbers(base, tmp_path, opt):
 
 
 def test_help_example_option_works(base, tmp_path):  # "Also": the --help example
-    r = runner.invoke(app, ["odometry", "--help"])
+    r = runner.invoke(app, ["odometry", "--help"], env={"COLUMNS": "160"})
     assert "estimator_options.alpha=0.3" in r.output
     r = _odo(
         base,

@@ -38,7 +38,14 @@ def prepare_method(
     return name, opts, preset
 
 
-def write_state_outputs(out: Path, run: Any, gt: Any, metrics: dict[str, Any]) -> list[str]:
+STATE_MAX_FRAMES = 5000
+"""Runs longer than this write the full state only on request (``--state``): it keeps about
+1.7 kB per frame in memory."""
+
+
+def write_state_outputs(
+    out: Path, run: Any, gt: Any, metrics: dict[str, Any], steps: Any = None
+) -> list[str]:
     """The navigator's full relative state (twistor UKF on its poses): ``state.csv``,
     ``state.png`` and, with ground truth, ``state_errors.png`` (errors with ±3σ); adds the
     state's error summary and NEES to ``metrics`` (key ``state``)."""
@@ -47,7 +54,7 @@ def write_state_outputs(out: Path, run: Any, gt: Any, metrics: dict[str, Any]) -
     from relnav.cli.track import plot_track, plot_track_errors
     from relnav.navigation.state import nees_band, relative_state
 
-    result = relative_state(run, gt_poses=gt)
+    result = relative_state(run, steps=steps, gt_poses=gt)
     result.to_csv(out / "state.csv")
     names = ["state.csv", plot_track(result, out / "state.png").name]
     if gt is not None:
@@ -81,6 +88,7 @@ def write_run_outputs(
     timings: dict[str, float] | None = None,
     errors_plot: bool = True,
     extra_outputs: list[str] | None = None,
+    state_steps: Any = None,
 ) -> dict[str, Any]:
     """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
 
@@ -133,8 +141,10 @@ def write_run_outputs(
                 title=f"{label}: error with respect to the ground truth",
             )
             outputs.append("errors.png")
-    if run.method == "relnav" and len(run.steps) >= 3:
-        outputs += write_state_outputs(out, run, gt[:n] if gt is not None else None, metrics)
+    frames = state_steps if state_steps is not None else run.steps
+    if run.method == "relnav" and len(frames) >= 3:
+        gt_n = gt[:n] if gt is not None else None
+        outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames)
         if metrics:
             from relnav.cli.evaluate import json_safe
 
@@ -195,6 +205,12 @@ def odometry(
     viz: bool = typer.Option(
         False, "--viz", help="Stream scans and trajectories to the Rerun viewer (extra \\[viz])."
     ),
+    state: bool = typer.Option(
+        None,
+        "--state/--no-state",
+        help="Write the navigator's full relative state (state.csv, state.png, "
+        f"state_errors.png); default: on for relnav up to {STATE_MAX_FRAMES} frames.",
+    ),
     rrd: Path = typer.Option(
         None,
         "--rrd",
@@ -241,6 +257,18 @@ def odometry(
             gt_poses=seq.gt_poses,
             fallback_rrd=Path(out) / "live.rrd",
         )
+    from relnav.navigation.state import StateRecord
+
+    if state is None:
+        state = name == "relnav" and n <= STATE_MAX_FRAMES
+    if state and name != "relnav":
+        raise ConfigError("--state needs the navigator (method relnav)")
+    records: list[Any] | None = [] if state else None
+    if name == "relnav" and n > STATE_MAX_FRAMES and not state:
+        console.print(
+            f"[yellow]{n} frames: the full relative state is skipped to keep memory flat "
+            "(--state writes it)[/]"
+        )
     t0 = time.perf_counter()
     with progress_bar() as bar:
         task = bar.add_task(preset or name, total=n)
@@ -249,6 +277,8 @@ def odometry(
             bar.advance(task)
             if live is not None:
                 live.log_frame(i, seq[i].points, s.pose)
+            if records is not None:
+                records.append(StateRecord.from_step(s))
 
         run = run_sequence(
             seq,
@@ -258,7 +288,7 @@ def odometry(
             max_frames=max_frames,
             progress=step,
             out=out,
-            keep_steps=name == "relnav",  # the navigator's state output needs its steps
+            keep_steps=False,  # memory stays flat; the state keeps its compact records
             strict=strict,
             **opts,
         )
@@ -284,6 +314,7 @@ def odometry(
         fmt=fmt,
         timings={"wall_s": wall},
         extra_outputs=live_file,
+        state_steps=records if records is not None else [],
     )
     table = Table(title=f"odometry — {preset or name}")
     table.add_column("quantity")

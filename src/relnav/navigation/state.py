@@ -17,6 +17,8 @@ frames the navigator flagged are predicted through (status ``predict``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +27,13 @@ from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import matrix_to_quat
 from relnav.geometry.se3 import invert
 
-__all__ = ["measurement_covariance", "nees_band", "pose_noise", "relative_state"]
+__all__ = [
+    "StateRecord",
+    "measurement_covariance",
+    "nees_band",
+    "pose_noise",
+    "relative_state",
+]
 
 _UNSEEN_VAR = 1e6  # variance (m², rad²) given to directions the scan did not constrain
 
@@ -52,9 +60,35 @@ def measurement_covariance(H_left: np.ndarray, T_target_sensor: np.ndarray) -> n
     return 0.5 * (C + C.T)
 
 
+@dataclass(frozen=True)
+class StateRecord:
+    """What :func:`relative_state` needs of one navigator frame (about 420 bytes).
+
+    Attributes
+    ----------
+    status : str
+        The frame's status (``"ok"``, ``"first"``, ``"failed"`` …).
+    pose : (4, 4) float64
+        Online ``T_target_sensor``.
+    information : (6, 6) float64 or None
+        The scan's own information about the pose (left twist, target frame).
+    """
+
+    status: str
+    pose: np.ndarray
+    information: np.ndarray | None = None
+
+    @classmethod
+    def from_step(cls, step: Any) -> StateRecord:
+        """From an :class:`relnav.odometry.OdometryStep` of the navigator."""
+        H = None if step.result is None else step.result.info.get("information")
+        return cls(str(step.status), np.array(step.pose, dtype=float), H)
+
+
 def relative_state(
     run: Any,
     *,
+    steps: Sequence[Any] | None = None,
     gt_poses: np.ndarray | None = None,
     n_mean_motion: float = 0.0,
     filter: str = "ukf",
@@ -66,6 +100,9 @@ def relative_state(
     ----------
     run : relnav.odometry.OdometryRun
         A run of method ``relnav`` (its steps carry the scans' information matrices).
+    steps : sequence of StateRecord or OdometryStep, optional
+        The frames (default ``run.steps``); a streamed run (``keep_steps=False``) passes the
+        compact records it kept.
     gt_poses : (N, 4, 4) float64, optional
         Ground-truth ``T_target_sensor`` per frame (attached as the truth).
     n_mean_motion : float
@@ -79,10 +116,14 @@ def relative_state(
     -------
     relnav.fusion.tracker.TrackResult
     """
-    noise = pose_noise(run)
+    frames = [
+        s if isinstance(s, StateRecord) else StateRecord.from_step(s)
+        for s in (run.steps if steps is None else steps)
+    ]
+    noise = pose_noise(frames)
     observations: list[Observation | None] = []
-    for step in run.steps:
-        H = None if step.result is None else step.result.info.get("information")
+    for step in frames:
+        H = step.information
         if step.status not in ("ok", "first"):
             observations.append(None)
             continue
@@ -93,7 +134,7 @@ def relative_state(
         observations.append(Observation(T_st[:3, 3], matrix_to_quat(T_st[:3, :3]), R=R))
     truth = None
     if gt_poses is not None:
-        T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(run.steps)]])
+        T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(frames)]])
         truth = TrackTruth.from_poses(np.asarray(run.timestamps, dtype=float), T_st_gt)
     if "q" not in tracker_options:
         # [interpretation] process noise per frame period from the poses' own white noise: the
@@ -112,7 +153,7 @@ def relative_state(
     return tracker.run(run.timestamps, observations, truth=truth, meta={"method": run.method})
 
 
-def pose_noise(run: Any) -> tuple[float, float]:
+def pose_noise(steps: Sequence[Any]) -> tuple[float, float]:
     """White noise of the navigator's poses (1σ: m, rad), from their second differences.
 
     For smooth motion the second difference ``log(Δ_{k-1}⁻¹ Δ_k)`` of the steps
@@ -123,8 +164,8 @@ def pose_noise(run: Any) -> tuple[float, float]:
     """
     from relnav.geometry.se3 import log_se3
 
-    poses = [s.pose for s in run.steps]
-    ok = [s.status in ("ok", "first") for s in run.steps]
+    poses = [s.pose for s in steps]
+    ok = [s.status in ("ok", "first") for s in steps]
     d2 = []
     for k in range(2, len(poses)):
         if ok[k] and ok[k - 1] and ok[k - 2]:
