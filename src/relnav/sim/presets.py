@@ -27,8 +27,16 @@ sim-bennu      ≈ 12.7 m), ``capsule`` (5 m) and ``asteroid`` (scaled to 10 m, 
 
 **[interpretation]** The paper's figures give the shapes but not the frame counts of scenarios
 1–4, nor the distances; the frame counts above are our choice, the distances follow from the
-path lengths and the point counts. Paper 1's HPR clouds came from 800-view renderings of NASA
-CAD models; we sample the procedural targets' surfaces directly (``surface-hpr``).
+path lengths and the point counts.
+
+Data generation of the five HPR presets (option ``model_cloud``): ``"fixed"`` (default) is
+paper 1's — one complete model cloud per target rendered from 800 views of a tessellated sphere
+and merged (:mod:`relnav.sim.model_cloud`, procedural targets instead of NASA CAD models), then
+HPR per pose, so consecutive scans share points; ``"resample"`` draws fresh uniform surface
+samples every frame (harsher: nothing repeats between scans). Each mode has its own
+``n_points`` tuned to the paper's counts (``benchmarks/paper1_cardinality.py``, mean pts/scan,
+fixed / resample): sim-eoi 3311 / 3073, sim-helical 433 / 430, sim-voyager 184 / 186,
+sim-orion 292 / 285, sim-bennu 145 / 153.
 
 Paper 2 (cross-source fusion, Tables 2–5):
 
@@ -133,18 +141,29 @@ def _real_curved(frames: int) -> dict[str, Any]:
     )
 
 
-def _hpr(n_points: int) -> dict[str, Any]:
-    return {"preset": "surface-hpr", "name": "lidar", "overrides": {"n_points": n_points}}
+MODEL_CLOUD_MODES = ("fixed", "resample")
 
 
-def _sim_eoi(frames: int) -> dict[str, Any]:
+def _hpr(n_points: dict[str, int], model_cloud: str) -> dict[str, Any]:
+    """HPR sensor spec; ``n_points`` per ``model_cloud`` mode (each tuned to the paper's count)."""
+    mode = str(model_cloud).lower()
+    if mode not in MODEL_CLOUD_MODES:
+        raise ConfigError(f"model_cloud must be 'fixed' or 'resample', got {model_cloud!r}")
+    return {
+        "preset": "surface-hpr",
+        "name": "lidar",
+        "overrides": {"n_points": n_points[mode], "model_cloud": mode},
+    }
+
+
+def _sim_eoi(frames: int, *, model_cloud: str = "fixed") -> dict[str, Any]:
     return dict(
         description="Paper 1 Sim-EoI: one ellipse of inspection (~290 m) around an "
         "Iridium/Globalstar-like satellite, HPR point clouds",
         frames=frames,
         dt=_dt_for(LEO_PERIOD_S, frames),
         target={"name": "iridium"},
-        sensors=[_hpr(4430)],
+        sensors=[_hpr({"fixed": _NP_FIXED["sim-eoi"], "resample": 4430}, model_cloud)],
         attitude={"initial_rpy_deg": (0.0, 0.0, 45.0)},
         trajectory={
             "kind": "ellipse-of-inspection",
@@ -153,14 +172,14 @@ def _sim_eoi(frames: int) -> dict[str, Any]:
     )
 
 
-def _sim_helical(frames: int) -> dict[str, Any]:
+def _sim_helical(frames: int, *, model_cloud: str = "fixed") -> dict[str, Any]:
     return dict(
         description="Paper 1 Sim-Helical: 360-degree helical approach (~206 m) to an "
         "Iridium/Globalstar-like satellite, HPR point clouds",
         frames=frames,
         dt=_dt_for(1500.0, frames),
         target={"name": "iridium"},
-        sensors=[_hpr(598)],
+        sensors=[_hpr({"fixed": _NP_FIXED["sim-helical"], "resample": 598}, model_cloud)],
         trajectory={
             "kind": "helical-approach",
             "params": {
@@ -174,15 +193,15 @@ def _sim_helical(frames: int) -> dict[str, Any]:
     )
 
 
-def _orbit_25(target: dict[str, Any], n_points: int, what: str) -> Callable[[int], dict]:
-    def build(frames: int) -> dict[str, Any]:
+def _orbit_25(target: dict[str, Any], n_points: dict[str, int], what: str) -> Callable[..., dict]:
+    def build(frames: int, *, model_cloud: str = "fixed") -> dict[str, Any]:
         return dict(
             description=f"Paper 1 {what}: 2.5 loops of an elliptic orbit (~788 m), "
             "HPR point clouds",
             frames=frames,
             dt=_dt_for(2.5 * LEO_PERIOD_S, frames),
             target=target,
-            sensors=[_hpr(n_points)],
+            sensors=[_hpr(n_points, model_cloud)],
             trajectory={
                 "kind": "elliptic-orbit",
                 "params": {
@@ -195,6 +214,16 @@ def _orbit_25(target: dict[str, Any], n_points: int, what: str) -> Callable[[int
         )
 
     return build
+
+
+_NP_FIXED = {
+    "sim-eoi": 4900,
+    "sim-helical": 598,
+    "sim-voyager": 332,
+    "sim-orion": 294,
+    "sim-bennu": 123,
+}
+"""``n_points`` of the HPR sensor with the fixed model cloud (tuned to the paper's counts)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,14 +272,32 @@ def _li_rotating(frames: int, *, distance: float = 3.0, axis: str = "z") -> dict
 _PRESETS: dict[str, tuple[Callable[..., dict[str, Any]], int, tuple[str, ...]]] = {
     "real-fb": (_real_fb, 151, ()),
     "real-curved": (_real_curved, 201, ()),
-    "sim-eoi": (_sim_eoi, 200, ()),
-    "sim-helical": (_sim_helical, 150, ()),
-    "sim-voyager": (_orbit_25({"name": "voyager"}, 332, "Sim-Voyager"), 250, ()),
-    "sim-orion": (_orbit_25({"name": "capsule"}, 335, "Sim-Orion"), 250, ()),
-    "sim-bennu": (
-        _orbit_25({"name": "asteroid", "scale_to": 10.0}, 150, "Sim-Bennu"),
+    "sim-eoi": (_sim_eoi, 200, ("model_cloud",)),
+    "sim-helical": (_sim_helical, 150, ("model_cloud",)),
+    "sim-voyager": (
+        _orbit_25(
+            {"name": "voyager"},
+            {"fixed": _NP_FIXED["sim-voyager"], "resample": 332},
+            "Sim-Voyager",
+        ),
         250,
-        (),
+        ("model_cloud",),
+    ),
+    "sim-orion": (
+        _orbit_25(
+            {"name": "capsule"}, {"fixed": _NP_FIXED["sim-orion"], "resample": 335}, "Sim-Orion"
+        ),
+        250,
+        ("model_cloud",),
+    ),
+    "sim-bennu": (
+        _orbit_25(
+            {"name": "asteroid", "scale_to": 10.0},
+            {"fixed": _NP_FIXED["sim-bennu"], "resample": 150},
+            "Sim-Bennu",
+        ),
+        250,
+        ("model_cloud",),
     ),
     "li-rotating": (_li_rotating, 16, ("distance", "axis")),
 }
