@@ -43,6 +43,22 @@ def test_fibonacci_sphere_unit_and_spread() -> None:
     assert np.abs(d.mean(axis=0)).max() < 0.01  # no preferred direction
 
 
+def test_random_thinning_is_nested_and_calibrated(voyager: Target) -> None:
+    kw = dict(n_views=100, resolution=32, thinning="random", seed=1)
+    small = model_cloud_for(voyager, size=300, **kw).points
+    big = model_cloud_for(voyager, size=600, **kw).points
+    rows = {r.tobytes() for r in big}
+    assert small.shape == (300, 3) and all(r.tobytes() in rows for r in small)
+    s = _sensor(model_cloud="fixed")
+    mc = s.model_cloud_of(voyager)
+    assert mc.thinning == "random" and mc.points.shape[0] > 200
+    # calibrated at 3 bounding radii (HPR keeps fewer points from farther away)
+    r = 3.0 * voyager.bounding_sphere[1]
+    poses = _orbit_poses(4, 90.0, r=r)
+    counts = [len(s.scan(voyager, T, np.random.default_rng(0))) for T in poses]
+    assert 0.6 * 200 < np.mean(counts) < 1.4 * 200
+
+
 def test_voxel_representatives_one_sample_per_voxel() -> None:
     rng = np.random.default_rng(3)
     P = rng.uniform(0.0, 1.0, (5000, 3))
@@ -52,8 +68,9 @@ def test_voxel_representatives_one_sample_per_voxel() -> None:
     assert len({tuple(c) for c in cells}) == 64
 
 
-def test_consecutive_noiseless_scans_share_points_of_one_cloud(voyager: Target) -> None:
-    s = _sensor(model_cloud="fixed")
+@pytest.mark.parametrize("thinning", ["random", "voxel"])
+def test_consecutive_noiseless_scans_share_points_of_one_cloud(voyager: Target, thinning) -> None:
+    s = _sensor(model_cloud="fixed", model_thinning=thinning)
     mc = s.model_cloud_of(voyager)
     T0, T1 = _orbit_poses()
     a = s.scan(voyager, T0, np.random.default_rng(0))
@@ -87,7 +104,7 @@ def test_resample_option_restores_fresh_samples(voyager: Target) -> None:
 
 
 def test_model_cloud_deterministic_by_seed(voyager: Target) -> None:
-    kw = dict(n_views=100, resolution=32, voxel=0.3)
+    kw = dict(n_views=100, resolution=32, thinning="random", size=500)
     a = model_cloud_for(voyager, seed=5, **kw).points.copy()
     mcmod._CACHE.clear()
     mcmod._RAW.clear()
@@ -121,6 +138,9 @@ def test_bad_model_cloud_parameters() -> None:
         dict(model_views=0),
         dict(model_resolution=1),
         dict(model_voxel=-0.1),
+        dict(model_voxel=0.0),
+        dict(model_thinning="octree"),
+        dict(model_size=0),
         dict(model_seed=-1),
     ):
         with pytest.raises(ConfigError):

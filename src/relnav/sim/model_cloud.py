@@ -13,11 +13,16 @@ does the same with the float64 ray caster of :mod:`relnav.sim.raycast`:
    the bounding sphere (first hits only: each view sees its visible surface), pixel grid rolled
    about the boresight by a seeded random angle;
 3. the views' points merged in the target frame (face index kept for each point);
-4. optionally voxelised: one point per occupied voxel, the one nearest the voxel centroid
-   (as :func:`relnav.features.keypoints.voxel_keypoints`, with a 1-D voxel key so that the
-   millions of merged points are thinned in a fraction of a second) **[interpretation: PCL's
-   VoxelGrid returns the centroid; keeping a real sample keeps every point on the mesh, with
-   its face]**.
+4. optionally thinned (``thinning``): ``"random"`` keeps a seeded random subset of ``size``
+   points (nested: a larger size keeps a superset), ``"voxel"`` one point per occupied voxel
+   of edge ``voxel``, the one nearest the voxel centroid (as
+   :func:`relnav.features.keypoints.voxel_keypoints`, with a 1-D voxel key so that millions
+   of merged points are thinned in a fraction of a second), ``"none"`` keeps every point.
+   **[interpretation]** Paper 1 does not say how its merged clouds were thinned. The voxel
+   grid leaves a regular lattice on flat faces, on which point-to-point ICP locks at lattice
+   offsets (measured on sim-voyager, voxel 0.25 m: the first 11 steps each off by 0.8 m,
+   T_error 4.8 %); random thinning keeps the merged views' own irregular sampling, so it is
+   the sensors' default.
 
 The merged views and the thinned clouds are cached in memory, keyed by the mesh's content and every
 parameter (the seed included), so the same target, parameters and seed give the same cloud.
@@ -65,15 +70,18 @@ class ModelCloud:
         Points on the mesh, target frame, metres (read-only array).
     faces : (N,) int64
         Mesh face of each point.
-    voxel : float
-        Voxel edge used to thin the merged views, metres (0: not voxelised).
+    thinning : str
+        ``"random"``, ``"voxel"`` or ``"none"``.
+    param : float
+        Random: the requested size; voxel: the voxel edge (m); none: 0.
     n_views : int
         Number of rendered views.
     """
 
     points: np.ndarray
     faces: np.ndarray
-    voxel: float
+    thinning: str
+    param: float
     n_views: int
 
 
@@ -167,13 +175,11 @@ def render_views(
     return np.concatenate(pts), np.concatenate(fcs)
 
 
-def _check(n_views: int, resolution: int, voxel: float, distance_factor: float) -> None:
+def _check(n_views: int, resolution: int, distance_factor: float) -> None:
     if not (isinstance(n_views, int | np.integer) and n_views >= 1):
         raise ConfigError(f"model_views must be a positive integer, got {n_views!r}")
     if not (isinstance(resolution, int | np.integer) and 2 <= resolution <= 4096):
         raise ConfigError(f"model_resolution must be an integer in [2, 4096], got {resolution!r}")
-    if not (math.isfinite(voxel) and voxel >= 0):
-        raise ConfigError(f"model_voxel must be >= 0 (metres), got {voxel!r}")
     if not (math.isfinite(distance_factor) and distance_factor > 1):
         raise ConfigError(f"view distance factor must be > 1, got {distance_factor!r}")
 
@@ -200,7 +206,7 @@ def merged_views(
     seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`render_views`, cached in memory by mesh content and parameters (read-only)."""
-    _check(n_views, resolution, 0.0, distance_factor)
+    _check(n_views, resolution, distance_factor)
     key = (mesh_fingerprint(target), int(n_views), int(resolution), float(distance_factor),
            int(seed))  # fmt: skip
     out = _RAW.get(key)
@@ -224,6 +230,8 @@ def model_cloud_for(
     *,
     n_views: int = 800,
     resolution: int = 64,
+    thinning: str = "none",
+    size: int = 0,
     voxel: float = 0.0,
     distance_factor: float = 3.0,
     seed: int = 0,
@@ -238,12 +246,16 @@ def model_cloud_for(
         Viewpoints on the tessellated sphere (paper 1: 800).
     resolution : int
         Pixels per side of each view's depth image **[interpretation; PCL's default is 150]**.
+    thinning : {"none", "random", "voxel"}
+        How the merged views are thinned.
+    size : int
+        ``random``: points kept (all if larger than the merged cloud).
     voxel : float
-        Voxel edge, metres; 0 keeps every merged point.
+        ``voxel``: voxel edge, metres (> 0).
     distance_factor : float
         View-sphere radius over the target's bounding radius (> 1).
     seed : int
-        Seed of the view sphere's rotation and the pixel grids' rolls.
+        Seed of the view sphere's rotation, the pixel grids' rolls and the random subset.
 
     Raises
     ------
@@ -252,8 +264,20 @@ def model_cloud_for(
     InputError
         The views see nothing (degenerate mesh).
     """
-    _check(n_views, resolution, voxel, distance_factor)
-    key = (mesh_fingerprint(target), int(n_views), int(resolution), float(voxel),
+    _check(n_views, resolution, distance_factor)
+    if thinning == "random":
+        if not (isinstance(size, int | np.integer) and size >= 1):
+            raise ConfigError(f"model cloud: random thinning needs size >= 1, got {size!r}")
+        param = float(size)
+    elif thinning == "voxel":
+        if not (math.isfinite(voxel) and voxel > 0):
+            raise ConfigError(f"model_voxel must be a positive length (m), got {voxel!r}")
+        param = float(voxel)
+    elif thinning == "none":
+        param = 0.0
+    else:
+        raise ConfigError(f"model_thinning must be random, voxel or none, got {thinning!r}")
+    key = (mesh_fingerprint(target), int(n_views), int(resolution), thinning, param,
            float(distance_factor), int(seed))  # fmt: skip
     mc = _CACHE.get(key)
     if mc is None:
@@ -264,17 +288,28 @@ def model_cloud_for(
             distance_factor=distance_factor,
             seed=seed,
         )
-        if voxel > 0:
+        keep = None
+        if thinning == "voxel":
             keep = voxel_representatives(P, voxel)
+        elif thinning == "random" and size < P.shape[0]:
+            order = _permutation(P.shape[0], seed)
+            keep = np.sort(order[: int(size)])
+        if keep is not None:
             P, F = P[keep], F[keep]
             P.setflags(write=False)
             F.setflags(write=False)
-        mc = ModelCloud(P, F, float(voxel), int(n_views))
+        mc = ModelCloud(P, F, thinning, param, int(n_views))
         _CACHE[key] = mc
         while len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)
-        log.debug("model cloud of %s: %d views, %d points (voxel %.4g m)",
-                  target.name, n_views, P.shape[0], voxel)  # fmt: skip
+        log.debug("model cloud of %s: %d views, %d points (%s %.4g)",
+                  target.name, n_views, P.shape[0], thinning, param)  # fmt: skip
     else:
         _CACHE.move_to_end(key)
     return mc
+
+
+def _permutation(n: int, seed: int) -> np.ndarray:
+    """Seeded permutation of ``range(n)`` (its prefixes are the nested random subsets)."""
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 1]))
+    return rng.permutation(n)

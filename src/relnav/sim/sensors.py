@@ -765,10 +765,16 @@ class SurfaceSampler(Sensor):
         ``fixed``: views of the tessellated sphere (paper 1: 800).
     model_resolution : int
         ``fixed``: pixels per side of each rendered view **[interpretation]**.
+    model_thinning : {"random", "voxel", "none"}
+        ``fixed``: how the merged views are thinned to the wanted density (see
+        :mod:`relnav.sim.model_cloud`; ``random`` by default **[interpretation]**).
+    model_size : int, optional
+        ``fixed``/``random``: points of the model cloud. ``None`` = calibrate once per target
+        so that about ``n_points`` points are visible from the same 8 viewpoints as
+        ``n_surface`` (fixed-point iteration ``size ← size · n_points / count``).
     model_voxel : float, optional
-        ``fixed``: voxel edge (m) thinning the merged views; 0 = no thinning. ``None`` =
-        calibrate once per target so that about ``n_points`` points are visible from the same 8
-        viewpoints as ``n_surface`` (fixed-point iteration ``v ← v·sqrt(count / n_points)``).
+        ``fixed``/``voxel``: voxel edge, m. ``None`` = calibrate likewise
+        (``v ← v · sqrt(count / n_points)``).
     model_seed : int
         ``fixed``: seed of the rendering (view-sphere rotation, pixel-grid rolls). Like the
         target's own seed it is fixed by default, so scenario seeds vary only the noise.
@@ -792,6 +798,8 @@ class SurfaceSampler(Sensor):
         model_cloud: str = "resample",
         model_views: int = 800,
         model_resolution: int = 64,
+        model_thinning: str = "random",
+        model_size: int | None = None,
         model_voxel: float | None = None,
         model_seed: int = 0,
     ) -> None:
@@ -804,7 +812,15 @@ class SurfaceSampler(Sensor):
         self.model_resolution = _int("model_resolution", model_resolution, lo=2)
         if self.model_resolution > 4096:
             raise ConfigError(f"model_resolution must be <= 4096, got {self.model_resolution}")
-        self.model_voxel = None if model_voxel is None else _num("model_voxel", model_voxel, lo=0.0)
+        if model_thinning not in ("random", "voxel", "none"):
+            raise ConfigError(
+                f"model_thinning must be 'random', 'voxel' or 'none', got {model_thinning!r}"
+            )
+        self.model_thinning = model_thinning
+        self.model_size = None if model_size is None else _int("model_size", model_size)
+        self.model_voxel = (
+            None if model_voxel is None else _num("model_voxel", model_voxel, lo=0.0, lo_open=True)
+        )
         if self.model_voxel is not None and not math.isfinite(self.model_voxel):
             raise ConfigError(f"model_voxel must be finite, got {self.model_voxel}")
         self.model_seed = _int("model_seed", model_seed, lo=0)
@@ -836,6 +852,8 @@ class SurfaceSampler(Sensor):
             "model_cloud": self.model_cloud,
             "model_views": self.model_views,
             "model_resolution": self.model_resolution,
+            "model_thinning": self.model_thinning,
+            "model_size": self.model_size,
             "model_voxel": self.model_voxel,
             "model_seed": self.model_seed,
         }
@@ -846,54 +864,77 @@ class SurfaceSampler(Sensor):
 
     # -- fixed model cloud ------------------------------------------------------------------
 
-    def _model(self, target: Target, voxel: float) -> ModelCloud:
+    def _model(self, target: Target, param: float) -> ModelCloud:
         return model_cloud_for(
             target,
             n_views=self.model_views,
             resolution=self.model_resolution,
-            voxel=voxel,
+            thinning=self.model_thinning,
+            size=int(param) if self.model_thinning == "random" else 0,
+            voxel=float(param) if self.model_thinning == "voxel" else 0.0,
             seed=self.model_seed,
         )
 
     def model_cloud_of(self, target: Target) -> ModelCloud:
         """The fixed model cloud of ``target`` (rendered and cached on first use)."""
-        voxel = self.model_voxel
-        if voxel is None:
-            key = ("surface_sampler.model_voxel", mesh_fingerprint(target), self.n_points,
+        param = {"random": self.model_size, "voxel": self.model_voxel, "none": 0.0}[
+            self.model_thinning
+        ]
+        if param is None:
+            key = ("surface_sampler.model", mesh_fingerprint(target), self.n_points,
                    self.hpr_radius_factor, self.model_views, self.model_resolution,
-                   self.model_seed)  # fmt: skip
-            voxel = _VOXEL_CACHE.get(key)
-            if voxel is None:
-                voxel = self._calibrate_voxel(target)
-                _VOXEL_CACHE[key] = voxel
+                   self.model_thinning, self.model_seed)  # fmt: skip
+            param = _MODEL_PARAM_CACHE.get(key)
+            if param is None:
+                param = self._calibrate_model(target)
+                _MODEL_PARAM_CACHE[key] = param
                 log.info(
-                    "SurfaceSampler %s: model cloud of %s, %d views, voxel %.4g m, %d points "
-                    "for ~%d visible",
+                    "SurfaceSampler %s: model cloud of %s, %d views, %s thinning (%.4g), "
+                    "%d points for ~%d visible",
                     self.name,
                     target.name,
                     self.model_views,
-                    voxel,
-                    self._model(target, voxel).points.shape[0],
+                    self.model_thinning,
+                    param,
+                    self._model(target, param).points.shape[0],
                     self.n_points,
                 )
-        return self._model(target, voxel)
+        return self._model(target, param)
 
-    def _calibrate_voxel(self, target: Target) -> float:
+    def _calibrate_model(self, target: Target) -> float:
+        """Model-cloud size (random) or voxel edge (voxel) giving ~``n_points`` visible."""
         c, rho = target.bounding_sphere
         views = c + 3.0 * rho * _CUBE_CORNERS
-        area = float(target.mesh.area)
-        v = math.sqrt(max(area, 1e-12) / (4.0 * self.n_points))
-        for _ in range(8):
-            P = self._model(target, v).points
+        voxel = self.model_thinning == "voxel"
+        x = (
+            math.sqrt(float(target.mesh.area) / (4.0 * self.n_points))
+            if voxel
+            else 3.0 * self.n_points
+        )
+        for _ in range(10):
+            P = self._model(target, x).points
             count = np.mean(
                 [hidden_point_removal(P, w, self.hpr_radius_factor).size for w in views]
             )
             ratio = max(float(count), 1.0) / self.n_points
-            v_new = v * math.sqrt(ratio)
             if abs(ratio - 1.0) < 0.02:
                 break
-            v = v_new
-        return float(v)
+            if voxel:
+                x = x * math.sqrt(ratio)
+            else:
+                x_new = max(1, round(x / ratio))
+                if x_new >= P.shape[0] and x >= P.shape[0]:
+                    log.warning(
+                        "SurfaceSampler %s: the merged views of %s (%d points) give only ~%d "
+                        "visible points; raise model_resolution",
+                        self.name,
+                        target.name,
+                        P.shape[0],
+                        count,
+                    )
+                    break
+                x = float(x_new)
+        return float(x)
 
     # -- sampling -------------------------------------------------------------------------
 
@@ -1016,7 +1057,7 @@ class SurfaceSampler(Sensor):
 _CUBE_CORNERS = np.array(
     [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64
 ) / math.sqrt(3.0)
-_VOXEL_CACHE: dict[tuple, float] = {}
+_MODEL_PARAM_CACHE: dict[tuple, float] = {}
 
 
 # --------------------------------------------------------------------------- presets
