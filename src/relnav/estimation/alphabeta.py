@@ -98,6 +98,12 @@ class AlphaBetaEstimator(RecursiveEstimator):
         ``Δt``; coherent default 1, literal 1e-5.
     v0 : float, optional
         Initial velocity (every component); coherent default 0, literal 1 (Paper 1 "V_k = 1").
+    average : bool, optional
+        Coherent filter only: each sweep's output is the mean of its iterates
+        **[interpretation]** (default True; False with ``paper_literal=True``). A constant-gain
+        filter cycling over inconsistent measurements ends each sweep on a limit cycle pulled
+        towards the LAST matches, i.e. the worst ones (ascending descriptor distance); the
+        sweep mean is much closer to the fixed point of the whole set.
     **kwargs
         Common options of :class:`~relnav.estimation._recursive.RecursiveEstimator`
         (``covariance`` default ``"residual"``).
@@ -112,9 +118,11 @@ class AlphaBetaEstimator(RecursiveEstimator):
         beta: float | None = None,
         dt: float | None = None,
         v0: float | None = None,
+        average: bool | None = None,
         **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
+        self.average = (not self.paper_literal) if average is None else bool(average)
         lit = self.paper_literal
         if lit and beta is not None:
             raise ConfigError("alphabeta: with paper_literal=True β = M (eq. 11); leave beta unset")
@@ -126,7 +134,13 @@ class AlphaBetaEstimator(RecursiveEstimator):
             raise ConfigError(f"alphabeta: v0 must be finite, got {v0!r}")
 
     def _options(self) -> dict[str, Any]:
-        return {"alpha": self.alpha, "beta": self.beta, "dt": self.dt, "v0": self.v0}
+        return {
+            "alpha": self.alpha,
+            "beta": self.beta,
+            "dt": self.dt,
+            "v0": self.v0,
+            "average": self.average,
+        }
 
     def _run(self, x0: np.ndarray, a: np.ndarray, b: np.ndarray, m: np.ndarray) -> _RunOutput:
         x = x0.copy()
@@ -140,6 +154,16 @@ class AlphaBetaEstimator(RecursiveEstimator):
             alpha_u = self.alpha / (1.0 + m)
             beta_u = self.beta / (1.0 + m)
             passes, step = _nlms_kernel(
-                x, v, a, b, alpha_u, beta_u, np.ones_like(m), self.dt, self.n_passes, self.tol
+                x,
+                v,
+                a,
+                b,
+                alpha_u,
+                beta_u,
+                np.ones_like(m),
+                self.dt,
+                self.n_passes,
+                self.tol,
+                self.average,
             )
         return _RunOutput(x=x, P=None, passes=passes, last_sweep_step=step, info={})
