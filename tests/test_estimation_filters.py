@@ -127,7 +127,8 @@ def sorted_problem():
 def test_kernels_match_dense_numpy_reference(name, opts, sorted_problem):
     src, tgt, corr = sorted_problem
     a, b = tgt[corr.tgt_idx], src[corr.src_idx]  # a ∈ P_k (target) builds H, ψ = b ∈ P_{k+1}
-    single = {"n_passes": 1} | ({"average": False} if name in ("alphabeta", "sdre") else {})
+    nlms = {"average": False, "normalise": "sample"}
+    single = {"n_passes": 1} | (nlms if name in ("alphabeta", "sdre") else {})
     est = get_estimator(name, **{"center": False, **single, **opts})  # raw-coordinate kernels
     m = adaptive_factors(corr.distance, est.adaptive, scale=est.m_scale, m_min=est.m_min)
     lit = est.paper_literal
@@ -209,7 +210,7 @@ def test_paper_gains_in_raw_coordinates_on_small_realistic_motion(name):
     for seed in range(10):
         src, tgt, corr, T = _realistic(seed)
         raw = {"center": False, "n_passes": 1} | ({"sigma_w_sdre": 5e-3} if name == "sdre" else {})
-        raw |= {"average": False} if name in ("alphabeta", "sdre") else {}
+        raw |= {"average": False, "normalise": "sample"} if name in ("alphabeta", "sdre") else {}
         est = get_estimator(name, **raw).estimate(src, tgt, corr)
         assert est.status == "ok"
         r, t = _errors(est.T_target_source, T)

@@ -32,7 +32,7 @@ The filter's own output is ``T_source_target``; the single inversion to ``T_targ
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numba import njit
@@ -41,8 +41,8 @@ from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     RecursiveEstimator,
     _check_positive,
-    _nlms_kernel,
     _RunOutput,
+    run_nlms,
 )
 from relnav.estimation.base import register_estimator
 
@@ -119,10 +119,18 @@ class AlphaBetaEstimator(RecursiveEstimator):
         dt: float | None = None,
         v0: float | None = None,
         average: bool | None = None,
+        normalise: Literal["set", "sample"] | None = None,
         **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
         self.average = (not self.paper_literal) if average is None else bool(average)
+        if normalise is None:
+            normalise = "sample" if self.paper_literal else "set"
+        if normalise not in ("set", "sample"):
+            raise ConfigError(
+                f"{self.name}: normalise must be 'set' or 'sample', got {normalise!r}"
+            )
+        self.normalise = normalise
         lit = self.paper_literal
         if lit and beta is not None:
             raise ConfigError("alphabeta: with paper_literal=True β = M (eq. 11); leave beta unset")
@@ -140,6 +148,7 @@ class AlphaBetaEstimator(RecursiveEstimator):
             "dt": self.dt,
             "v0": self.v0,
             "average": self.average,
+            "normalise": self.normalise,
         }
 
     def _run(self, x0: np.ndarray, a: np.ndarray, b: np.ndarray, m: np.ndarray) -> _RunOutput:
@@ -153,7 +162,7 @@ class AlphaBetaEstimator(RecursiveEstimator):
         else:
             alpha_u = self.alpha / (1.0 + m)
             beta_u = self.beta / (1.0 + m)
-            passes, step = _nlms_kernel(
+            passes, step = run_nlms(
                 x,
                 v,
                 a,
@@ -165,5 +174,6 @@ class AlphaBetaEstimator(RecursiveEstimator):
                 self.n_passes,
                 self.tol,
                 self.average,
+                self.normalise,
             )
         return _RunOutput(x=x, P=None, passes=passes, last_sweep_step=step, info={})

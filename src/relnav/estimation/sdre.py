@@ -44,8 +44,8 @@ from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     RecursiveEstimator,
     _check_positive,
-    _nlms_kernel,
     _RunOutput,
+    run_nlms,
 )
 from relnav.estimation.base import register_estimator
 
@@ -126,6 +126,7 @@ class SDREEstimator(RecursiveEstimator):
         sigma_w_sdre: float | None = None,
         sigma_v: float = 1.0,
         average: bool | None = None,
+        normalise: Literal["set", "sample"] | None = None,
         m_role: Literal["noise", "input"] | None = None,
         **kwargs: Any,
     ) -> None:
@@ -136,6 +137,13 @@ class SDREEstimator(RecursiveEstimator):
             raise ConfigError(f"sdre: m_role must be 'noise' or 'input', got {m_role!r}")
         self.m_role = m_role
         self.average = (not self.paper_literal) if average is None else bool(average)
+        if normalise is None:
+            normalise = "sample" if self.paper_literal else "set"
+        if normalise not in ("set", "sample"):
+            raise ConfigError(
+                f"{self.name}: normalise must be 'set' or 'sample', got {normalise!r}"
+            )
+        self.normalise = normalise
         if sigma_w_sdre is None:
             sigma_w_sdre = 5e-3 if self.paper_literal else 0.5
         self.sigma_w_sdre = _check_positive("sigma_w_sdre", sigma_w_sdre)
@@ -146,6 +154,7 @@ class SDREEstimator(RecursiveEstimator):
             "sigma_w_sdre": self.sigma_w_sdre,
             "sigma_v": self.sigma_v,
             "average": self.average,
+            "normalise": self.normalise,
             "m_role": self.m_role,
         }
 
@@ -163,7 +172,7 @@ class SDREEstimator(RecursiveEstimator):
         x = x0.copy()
         xi, g = self.gains(m)
         hs = m if self.paper_literal else np.ones_like(m)
-        passes, step = _nlms_kernel(
+        passes, step = run_nlms(
             x,
             np.zeros(12),
             a,
@@ -175,6 +184,7 @@ class SDREEstimator(RecursiveEstimator):
             self.n_passes,
             self.tol,
             self.average,
+            self.normalise,
         )
         info = {"gain_mean": float(g.mean()), "xi_mean": float(xi.mean())}
         return _RunOutput(x=x, P=None, passes=passes, last_sweep_step=step, info=info)
