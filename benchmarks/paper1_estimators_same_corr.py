@@ -45,8 +45,21 @@ def parse_variant(spec: str) -> tuple[str, dict]:
     return name, opts
 
 
-def pair_correspondences(seq: ScanSequence, descriptor: str, n: int, shift: float):
-    reg = FeatureRegistration(descriptor, "gcc", "svd")
+def pair_correspondences(
+    seq: ScanSequence,
+    descriptor: str,
+    n: int,
+    shift: float,
+    descriptor_options: dict | None = None,
+    radius_factor: float | None = None,
+):
+    reg = FeatureRegistration(
+        descriptor,
+        "gcc",
+        "svd",
+        descriptor_options=descriptor_options,
+        radius_factor=radius_factor,
+    )
     off = np.array([shift, 0.0, 0.0])
     feats = [reg.prepare(np.asarray(seq[k].points) + off) for k in range(n)]
     out = []
@@ -101,7 +114,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--model-cloud", default="fixed")
     ap.add_argument("--shift", type=float, default=0.0)
+    ap.add_argument(
+        "--descriptor-option", action="append", default=[], help="key=value (repeatable)"
+    )
+    ap.add_argument("--radius-factor", type=float, default=None)
     a = ap.parse_args()
+    dopts = parse_variant("x:" + ",".join(a.descriptor_option))[1]
     print("preset descriptor variant T_error_pct e_R_avg_deg flagged mean_passes est_ms")
     with tempfile.TemporaryDirectory() as tmp:
         for preset in a.presets:
@@ -111,7 +129,7 @@ def main() -> None:
             seq = ScanSequence(d)
             n = len(seq)
             for desc in a.descriptors:
-                pairs = pair_correspondences(seq, desc, n, a.shift)
+                pairs = pair_correspondences(seq, desc, n, a.shift, dopts, a.radius_factor)
                 for v in a.variants:
                     W, bad, passes, ms = run_variant(pairs, v, seq.gt_poses[0])
                     m = evaluate_trajectories(seq.timestamps[:n], W, seq.timestamps, seq.gt_poses)

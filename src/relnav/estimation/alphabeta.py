@@ -12,7 +12,12 @@ descriptor distance (``a_u`` from the target ``P_k`` builds ``H_u``, ``ψ_u = b_
     α_u = α₀ / (1 + M_u),  β_u = β₀ / (1 + M_u)     defaults α₀ = 0.5, β₀ = 0, Δt = 1, v₀ = 0
 
 With ``β₀ = 0`` this is an adaptive-gain normalised-LMS; ``α ∈ (0, 2)`` makes every update a
-contraction towards the measurement's solution set.
+contraction towards the measurement's solution set. By default the sweeps are repeated until
+the state settles, in whitened coordinates with one normaliser for the whole set
+(``normalise="set"``, :func:`~relnav.estimation._recursive.run_nlms`), and each sweep's output
+is the mean of its iterates (``average``): the converged filter is then close to the fit
+weighted by ``α_u`` (measured on sim-voyager, fixed cloud, 40 frames, the same GCC
+correspondences: within 1.6× of Kalman's T_error for every descriptor).
 
 ``paper_literal=True`` implements the printed eqs. 22–25 verbatim::
 

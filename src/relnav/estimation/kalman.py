@@ -24,7 +24,12 @@ With Paper 1's ``σ_v = 1``, ``p₀ = 1`` and metre-scale points a single pass i
 least-squares estimate regularised towards the identity (prior weight ``1/p₀`` against data
 weight ``~Σ‖a_u‖²/M_u``): the estimate stops short of the true motion by a fraction that shrinks
 with the number and spread of correspondences. ``p0`` large (e.g. 1e6), small ``sigma_v`` or more
-passes remove that bias (see tests).
+passes remove that bias (see tests). By default the sweeps are repeated, each restarted from
+``P = p₀ I`` at the current state, until the state settles (``n_passes``, ``tol``,
+``reset_covariance``): the converged filter is the ``1/M_u``-weighted least-squares fit, up to
+the fading memory of ``σ_w`` (process noise added at every match), which discounts the first —
+best — matches of a long sweep (sim-eoi, ~3 000 matches: T_error 0.75 % vs 0.01–0.2 % for the
+other filters on the same correspondences).
 """
 
 from __future__ import annotations
