@@ -26,7 +26,7 @@ from relnav.estimation import get_estimator
 from relnav.eval.metrics import evaluate_trajectories
 from relnav.io.sequences import ScanSequence
 from relnav.registration.feature import FeatureRegistration
-from relnav.sim.presets import get_preset
+from relnav.sim.presets import get_preset, preset_options
 from relnav.sim.scenario import simulate
 
 
@@ -124,7 +124,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for preset in a.presets:
             d = Path(tmp) / preset
-            sc = get_preset(preset, max_frames=a.frames, seed=a.seed, model_cloud=a.model_cloud)
+            opts = {"model_cloud": a.model_cloud} if "model_cloud" in preset_options(preset) else {}
+            sc = get_preset(preset, max_frames=a.frames, seed=a.seed, **opts)
             simulate(sc, d)
             seq = ScanSequence(d)
             n = len(seq)
