@@ -309,6 +309,13 @@ def test_preset_point_counts_in_band(tmp_path, name, frames):
     assert abs(mean / PAPER_MEAN_POINTS[name] - 1) < 0.25
 
 
+def test_preset_point_counts_in_band_resampled(tmp_path):
+    sc = get_preset("sim-voyager", frames=50, model_cloud="resample")
+    summary = simulate(sc, tmp_path / "resampled")
+    mean = summary.sensors[0].mean_points
+    assert abs(mean / PAPER_MEAN_POINTS["sim-voyager"] - 1) < 0.25
+
+
 def test_target_mesh_swap(shared_targets):
     mesh = shared_targets / "voyager.ply"
     if not mesh.is_file():

@@ -24,7 +24,13 @@ With Paper 1's ``σ_v = 1``, ``p₀ = 1`` and metre-scale points a single pass i
 least-squares estimate regularised towards the identity (prior weight ``1/p₀`` against data
 weight ``~Σ‖a_u‖²/M_u``): the estimate stops short of the true motion by a fraction that shrinks
 with the number and spread of correspondences. ``p0`` large (e.g. 1e6), small ``sigma_v`` or more
-passes remove that bias (see tests).
+passes remove that bias (see tests). By default the sweeps are repeated, each restarted from
+``P = p₀ I`` at the current state, until the state settles (``n_passes``, ``tol``,
+``reset_covariance``): the converged filter is the ``1/M_u``-weighted least-squares fit, up to
+the fading memory of ``σ_w`` (process noise added at every match), which discounts the first —
+best — matches of a long sweep (sim-eoi, ~3 000 matches, 30 frames, HoD-S/GCC: T_error 1.07 %
+vs 0.11–0.13 % for αβ/SDRE on the same correspondences; Paper 1 also found its Kalman tuning
+sensitive to the cloud's cardinality).
 """
 
 from __future__ import annotations
@@ -59,6 +65,8 @@ def _kalman_kernel(
     n_passes: int,
     tol: float,
     literal: bool,
+    p0: float,
+    reset: bool,
     joseph: bool,
 ) -> tuple[bool, int, float]:
     """Run the Kalman updates in place on ``x`` (12,) and ``P`` (12, 12).
@@ -79,6 +87,11 @@ def _kalman_kernel(
     for _p in range(n_passes):
         passes += 1
         xs[:] = x
+        if reset and _p > 0:
+            for r in range(12):
+                for q in range(12):
+                    P[r, q] = 0.0
+                P[r, r] = p0
         for u in range(n):
             a = A[u]
             hs = M[u] if literal else 1.0
@@ -158,6 +171,13 @@ class KalmanEstimator(RecursiveEstimator):
         Measurement noise std scale (m); ``V_u = M_u σ_v² I₃``. Paper 1: 1.
     sigma_w : float
         Process noise std per correspondence step; ``W = σ_w² I₁₂``. Paper 1: 5e-3.
+    reset_covariance : bool, optional
+        Restart every sweep after the first from ``P = p₀ I`` at the current state
+        **[interpretation]**. Default True (coherent), False with ``paper_literal=True``.
+        Carrying ``P`` over counts every correspondence again at each sweep, so the prior's
+        weight only decays like 1/sweeps and the filter creeps towards the least-squares fit;
+        restarting makes each sweep a regularised step from the current estimate (a proximal
+        iteration) that converges geometrically to the same ``1/M_u``-weighted fit.
     p0 : float
         Initial state covariance ``P₀ = p₀ I₁₂`` **[interpretation]**, default 1.
     joseph : bool
@@ -180,6 +200,7 @@ class KalmanEstimator(RecursiveEstimator):
         sigma_v: float = 1.0,
         sigma_w: float = 5e-3,
         p0: float = 1.0,
+        reset_covariance: bool | None = None,
         joseph: bool = True,
         **kwargs: Any,
     ) -> None:
@@ -187,6 +208,9 @@ class KalmanEstimator(RecursiveEstimator):
         self.sigma_v = _check_positive("sigma_v", sigma_v)
         self.sigma_w = _check_positive("sigma_w", sigma_w, allow_zero=True)
         self.p0 = _check_positive("p0", p0)
+        self.reset_covariance = (
+            (not self.paper_literal) if reset_covariance is None else bool(reset_covariance)
+        )
         self.joseph = bool(joseph)
 
     def _options(self) -> dict[str, Any]:
@@ -194,6 +218,7 @@ class KalmanEstimator(RecursiveEstimator):
             "sigma_v": self.sigma_v,
             "sigma_w": self.sigma_w,
             "p0": self.p0,
+            "reset_covariance": self.reset_covariance,
             "joseph": self.joseph,
         }
 
@@ -211,6 +236,8 @@ class KalmanEstimator(RecursiveEstimator):
             self.n_passes,
             self.tol,
             self.paper_literal,
+            self.p0,
+            self.reset_covariance,
             self.joseph,
         )
         if not ok:

@@ -11,8 +11,10 @@ per beam/pixel against the target mesh (first hit, float64-exact range; see
 random and add noise. Rays that cannot reach the target's bounding sphere are never cast,
 which only saves time: the output is identical to casting them.
 
-:class:`SurfaceSampler` reproduces paper 1's simulated clouds: uniform surface samples of the
-model, hidden-point removal (Katz et al. 2007) from the sensor position, optional noise.
+:class:`SurfaceSampler` reproduces paper 1's simulated clouds: one complete model point cloud
+rendered once per target from a tessellated sphere of views (``model_cloud="fixed"``, paper 1's
+data generation) or fresh uniform surface samples every frame (``"resample"``), then
+hidden-point removal (Katz et al. 2007) from the sensor position, then optional noise.
 
 Random numbers are drawn in a fixed order from the ``rng`` passed to :meth:`Sensor.scan`
 (and only for returns that survive the deterministic gates), so a given generator state
@@ -32,6 +34,7 @@ from numba import njit
 
 from relnav.errors import ConfigError, InputError
 from relnav.sim.hpr import hidden_point_removal
+from relnav.sim.model_cloud import ModelCloud, mesh_fingerprint, model_cloud_for
 from relnav.sim.noise import (
     add_range_noise,
     as_generator,
@@ -720,26 +723,26 @@ class DepthCamera(_RaySensor):
 
 
 class SurfaceSampler(Sensor):
-    """Paper 1's simulated clouds: uniform surface samples + hidden point removal.
+    """Paper 1's simulated clouds: points of the target's surface + hidden point removal.
 
-    Per frame: draw ``n_surface`` area-weighted uniform samples on the mesh (seeded by the
-    scan's ``rng``), transform them to the sensor frame, keep the points visible from the
-    sensor origin by HPR (:func:`relnav.sim.hpr.hidden_point_removal`), then crop to
-    ``[min_range, max_range]`` and the optional field of view, apply dropout and noise.
+    Per frame: take the surface points (see ``model_cloud``), transform them to the sensor
+    frame, keep the points visible from the sensor origin by HPR
+    (:func:`relnav.sim.hpr.hidden_point_removal`), then crop to ``[min_range, max_range]`` and
+    the optional field of view, apply dropout and noise (drawn from the scan's ``rng``).
 
     Parameters
     ----------
     name : str
         Sensor name.
     n_points : int
-        Wanted number of VISIBLE points per frame, on average (used when ``n_surface`` is
-        None).
+        Wanted number of VISIBLE points per frame, on average (calibrates ``n_surface`` or
+        ``model_voxel`` when they are None).
     n_surface : int, optional
-        Surface samples per frame. ``None`` = calibrate once per target: the mean HPR visible
-        fraction ``f`` over 8 fixed viewpoints (cube-corner directions at 3× the bounding
-        radius, fixed seed) gives ``n_surface = n_points / f`` (two fixed-point passes, since
-        HPR's kept fraction depends on density). Independent of the scan order, hence
-        deterministic.
+        ``resample`` only: surface samples per frame. ``None`` = calibrate once per target: the
+        mean HPR visible fraction ``f`` over 8 fixed viewpoints (cube-corner directions at 3×
+        the bounding radius, fixed seed) gives ``n_surface = n_points / f`` (two fixed-point
+        passes, since HPR's kept fraction depends on density). Independent of the scan order,
+        hence deterministic.
     hpr_radius_factor : float
         HPR flipping radius over the farthest point distance, ``10**γ`` (default 100,
         ``γ = 2`` **[interpretation]**). Smaller → sparser, more aggressive removal.
@@ -752,6 +755,29 @@ class SurfaceSampler(Sensor):
         or on each coordinate (``"isotropic"``).
     dropout : float
         Probability that a visible point is lost.
+    model_cloud : {"resample", "fixed"}
+        ``"fixed"`` = paper 1's data generation: ONE complete model cloud per target, rendered
+        from ``model_views`` views of a tessellated sphere and merged
+        (:mod:`relnav.sim.model_cloud`), shared by every frame, so consecutive noiseless scans
+        share points. ``"resample"`` = fresh area-weighted uniform surface samples every frame
+        (harsher: no point repeats between scans).
+    model_views : int
+        ``fixed``: views of the tessellated sphere (paper 1: 800).
+    model_resolution : int
+        ``fixed``: pixels per side of each rendered view **[interpretation]**.
+    model_thinning : {"random", "voxel", "none"}
+        ``fixed``: how the merged views are thinned to the wanted density (see
+        :mod:`relnav.sim.model_cloud`; ``random`` by default **[interpretation]**).
+    model_size : int, optional
+        ``fixed``/``random``: points of the model cloud. ``None`` = calibrate once per target
+        so that about ``n_points`` points are visible from the same 8 viewpoints as
+        ``n_surface`` (fixed-point iteration ``size ← size · n_points / count``).
+    model_voxel : float, optional
+        ``fixed``/``voxel``: voxel edge, m. ``None`` = calibrate likewise
+        (``v ← v · sqrt(count / n_points)``).
+    model_seed : int
+        ``fixed``: seed of the rendering (view-sphere rotation, pixel-grid rolls). Like the
+        target's own seed it is fixed by default, so scenario seeds vary only the noise.
     """
 
     kind: ClassVar[str] = "surface_sampler"
@@ -769,9 +795,35 @@ class SurfaceSampler(Sensor):
         noise_sigma: float = 0.0,
         noise_mode: str = "range",
         dropout: float = 0.0,
+        model_cloud: str = "resample",
+        model_views: int = 800,
+        model_resolution: int = 64,
+        model_thinning: str = "random",
+        model_size: int | None = None,
+        model_voxel: float | None = None,
+        model_seed: int = 0,
     ) -> None:
         self.name = str(name)
         self.n_points = _int("n_points", n_points)
+        if model_cloud not in ("resample", "fixed"):
+            raise ConfigError(f"model_cloud must be 'fixed' or 'resample', got {model_cloud!r}")
+        self.model_cloud = model_cloud
+        self.model_views = _int("model_views", model_views)
+        self.model_resolution = _int("model_resolution", model_resolution, lo=2)
+        if self.model_resolution > 4096:
+            raise ConfigError(f"model_resolution must be <= 4096, got {self.model_resolution}")
+        if model_thinning not in ("random", "voxel", "none"):
+            raise ConfigError(
+                f"model_thinning must be 'random', 'voxel' or 'none', got {model_thinning!r}"
+            )
+        self.model_thinning = model_thinning
+        self.model_size = None if model_size is None else _int("model_size", model_size)
+        self.model_voxel = (
+            None if model_voxel is None else _num("model_voxel", model_voxel, lo=0.0, lo_open=True)
+        )
+        if self.model_voxel is not None and not math.isfinite(self.model_voxel):
+            raise ConfigError(f"model_voxel must be finite, got {self.model_voxel}")
+        self.model_seed = _int("model_seed", model_seed, lo=0)
         self.n_surface = None if n_surface is None else _int("n_surface", n_surface)
         self.hpr_radius_factor = _num("hpr_radius_factor", hpr_radius_factor, lo=1.0, lo_open=True)
         self.min_range, self.max_range_m = _check_ranges(min_range, max_range)
@@ -797,11 +849,92 @@ class SurfaceSampler(Sensor):
             "noise_sigma": self.noise_sigma,
             "noise_mode": self.noise_mode,
             "dropout": self.dropout,
+            "model_cloud": self.model_cloud,
+            "model_views": self.model_views,
+            "model_resolution": self.model_resolution,
+            "model_thinning": self.model_thinning,
+            "model_size": self.model_size,
+            "model_voxel": self.model_voxel,
+            "model_seed": self.model_seed,
         }
 
     @property
     def max_range(self) -> float:
         return float(self.max_range_m)
+
+    # -- fixed model cloud ------------------------------------------------------------------
+
+    def _model(self, target: Target, param: float) -> ModelCloud:
+        return model_cloud_for(
+            target,
+            n_views=self.model_views,
+            resolution=self.model_resolution,
+            thinning=self.model_thinning,
+            size=int(param) if self.model_thinning == "random" else 0,
+            voxel=float(param) if self.model_thinning == "voxel" else 0.0,
+            seed=self.model_seed,
+        )
+
+    def model_cloud_of(self, target: Target) -> ModelCloud:
+        """The fixed model cloud of ``target`` (rendered and cached on first use)."""
+        param = {"random": self.model_size, "voxel": self.model_voxel, "none": 0.0}[
+            self.model_thinning
+        ]
+        if param is None:
+            key = ("surface_sampler.model", mesh_fingerprint(target), self.n_points,
+                   self.hpr_radius_factor, self.model_views, self.model_resolution,
+                   self.model_thinning, self.model_seed)  # fmt: skip
+            param = _MODEL_PARAM_CACHE.get(key)
+            if param is None:
+                param = self._calibrate_model(target)
+                _MODEL_PARAM_CACHE[key] = param
+                log.info(
+                    "SurfaceSampler %s: model cloud of %s, %d views, %s thinning (%.4g), "
+                    "%d points for ~%d visible",
+                    self.name,
+                    target.name,
+                    self.model_views,
+                    self.model_thinning,
+                    param,
+                    self._model(target, param).points.shape[0],
+                    self.n_points,
+                )
+        return self._model(target, param)
+
+    def _calibrate_model(self, target: Target) -> float:
+        """Model-cloud size (random) or voxel edge (voxel) giving ~``n_points`` visible."""
+        c, rho = target.bounding_sphere
+        views = c + 3.0 * rho * _CUBE_CORNERS
+        voxel = self.model_thinning == "voxel"
+        x = (
+            math.sqrt(float(target.mesh.area) / (4.0 * self.n_points))
+            if voxel
+            else 3.0 * self.n_points
+        )
+        for _ in range(10):
+            P = self._model(target, x).points
+            count = np.mean(
+                [hidden_point_removal(P, w, self.hpr_radius_factor).size for w in views]
+            )
+            ratio = max(float(count), 1.0) / self.n_points
+            if abs(ratio - 1.0) < 0.02:
+                break
+            if voxel:
+                x = x * math.sqrt(ratio)
+            else:
+                x_new = max(1, round(x / ratio))
+                if x_new >= P.shape[0] and x >= P.shape[0]:
+                    log.warning(
+                        "SurfaceSampler %s: the merged views of %s (%d points) give only ~%d "
+                        "visible points; raise model_resolution",
+                        self.name,
+                        target.name,
+                        P.shape[0],
+                        count,
+                    )
+                    break
+                x = float(x_new)
+        return float(x)
 
     # -- sampling -------------------------------------------------------------------------
 
@@ -862,8 +995,7 @@ class SurfaceSampler(Sensor):
 
     def _calibrate(self, target: Target) -> int:
         c, rho = target.bounding_sphere
-        views = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-        views = c + 3.0 * rho * views / math.sqrt(3.0)
+        views = c + 3.0 * rho * _CUBE_CORNERS
         n = 4 * self.n_points
         for _ in range(2):
             rng = np.random.default_rng(0)
@@ -881,8 +1013,11 @@ class SurfaceSampler(Sensor):
     ) -> SensorReturn:
         T = _check_pose(T_target_sensor)
         gen = as_generator(rng)
-        n = self.surface_samples_for(target)
-        pts_t, faces = self.sample_surface(target, n, gen)
+        if self.model_cloud == "fixed":
+            mc = self.model_cloud_of(target)
+            pts_t, faces = mc.points, mc.faces
+        else:
+            pts_t, faces = self.sample_surface(target, self.surface_samples_for(target), gen)
         R, t = T[:3, :3], T[:3, 3]
         pts_s = (pts_t - t) @ R
         vis = hidden_point_removal(pts_s, np.zeros(3), self.hpr_radius_factor)
@@ -917,6 +1052,12 @@ class SurfaceSampler(Sensor):
             true_range=r,
             incidence=np.arccos(np.clip(np.nan_to_num(cos_inc), 0.0, 1.0)),
         )
+
+
+_CUBE_CORNERS = np.array(
+    [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64
+) / math.sqrt(3.0)
+_MODEL_PARAM_CACHE: dict[tuple, float] = {}
 
 
 # --------------------------------------------------------------------------- presets
