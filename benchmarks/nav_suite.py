@@ -199,13 +199,18 @@ PAPER_PRESETS = ("sim-eoi", "sim-helical", "sim-voyager", "sim-orion", "sim-benn
 
 
 def paper(max_frames: int = 60) -> dict[str, dict[str, Any]]:
-    """Paper 1's five HPR presets, their first ``max_frames`` frames (as in the grid)."""
+    """Paper 1's five HPR presets, their first ``max_frames`` frames (as in the grid): with paper
+    1's data generation (one model cloud, the same surface points in every scan) and with fresh
+    surface samples per scan (``-resample``: what a real sensor does)."""
     from relnav.sim.presets import get_preset
 
-    return {
-        name: get_preset(name, max_frames=max_frames).model_dump(mode="json")
-        for name in PAPER_PRESETS
-    }
+    out: dict[str, dict[str, Any]] = {}
+    for name in PAPER_PRESETS:
+        sc = get_preset(name, max_frames=max_frames).model_dump(mode="json")
+        out[name] = sc
+        re = get_preset(name, max_frames=max_frames, model_cloud="resample")
+        out[f"{name}-resample"] = {**re.model_dump(mode="json"), "name": f"{name}-resample"}
+    return out
 
 
 def _finish(s: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
