@@ -270,3 +270,18 @@ def test_bootstrap_second_pass_keeps_one_pose_per_frame(orbit_seq):
     assert all(s.status in ("first", "ok") for s in run.steps)
     err = np.linalg.norm((invert(orbit_seq.gt_poses[11]) @ run.poses[11])[:3, 3])
     assert err < 2.0
+
+
+def test_numba_se3_maps_equal_the_reference(rng):
+    from relnav.geometry import se3 as ref
+    from relnav.navigation import lie
+
+    angles = [0.0, 1e-12, 1e-6, 0.5, 2.0, 2.99, np.pi - 1e-4, np.pi - 1e-7, np.pi]
+    for ang in angles + list(rng.uniform(0, np.pi, 50)):
+        ax = rng.normal(size=3)
+        xi = np.r_[rng.normal(0, 5, 3), ang * ax / np.linalg.norm(ax)]
+        T = ref.exp_se3(xi)
+        np.testing.assert_allclose(lie.exp_se3(xi), T, atol=1e-12)
+        np.testing.assert_allclose(ref.exp_se3(lie.log_se3(T)), T, atol=1e-6)
+        if ang < np.pi - 1e-3:  # away from π the twist itself is unique
+            np.testing.assert_allclose(lie.log_se3(T), ref.log_se3(T), atol=1e-9)

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from relnav.geometry.se3 import exp_se3, invert, log_se3
+from relnav.geometry.se3 import invert
+from relnav.navigation.lie import exp_se3, log_se3
 
 __all__ = ["ConstantVelocityFilter", "adjoint"]
 
