@@ -861,6 +861,22 @@ class RecursiveEstimator:
 # ---------------------------------------------------------------------------------------------
 
 
+def nlms_options(
+    name: str, paper_literal: bool, average: bool | None, normalise: str | None
+) -> tuple[bool, str]:
+    """Resolve the ``average`` and ``normalise`` options of the NLMS filters (αβ, SDRE).
+
+    Defaults: the coherent reading averages the sweeps and normalises over the set;
+    ``paper_literal`` keeps one sweep's last iterate and the per-sample normaliser.
+    """
+    avg = (not paper_literal) if average is None else bool(average)
+    if normalise is None:
+        normalise = "sample" if paper_literal else "set"
+    if normalise not in ("set", "sample"):
+        raise ConfigError(f"{name}: normalise must be 'set' or 'sample', got {normalise!r}")
+    return avg, normalise
+
+
 def run_nlms(
     x: np.ndarray,
     v: np.ndarray,

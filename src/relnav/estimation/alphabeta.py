@@ -49,6 +49,7 @@ from relnav.estimation._recursive import (
     RecursiveEstimator,
     _check_positive,
     _RunOutput,
+    nlms_options,
     run_nlms,
 )
 from relnav.estimation.base import register_estimator
@@ -130,14 +131,9 @@ class AlphaBetaEstimator(RecursiveEstimator):
         **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
-        self.average = (not self.paper_literal) if average is None else bool(average)
-        if normalise is None:
-            normalise = "sample" if self.paper_literal else "set"
-        if normalise not in ("set", "sample"):
-            raise ConfigError(
-                f"{self.name}: normalise must be 'set' or 'sample', got {normalise!r}"
-            )
-        self.normalise = normalise
+        self.average, self.normalise = nlms_options(
+            self.name, self.paper_literal, average, normalise
+        )
         lit = self.paper_literal
         if lit and beta is not None:
             raise ConfigError("alphabeta: with paper_literal=True β = M (eq. 11); leave beta unset")

@@ -45,6 +45,7 @@ from relnav.estimation._recursive import (
     RecursiveEstimator,
     _check_positive,
     _RunOutput,
+    nlms_options,
     run_nlms,
 )
 from relnav.estimation.base import register_estimator
@@ -136,14 +137,9 @@ class SDREEstimator(RecursiveEstimator):
         if m_role not in ("noise", "input"):
             raise ConfigError(f"sdre: m_role must be 'noise' or 'input', got {m_role!r}")
         self.m_role = m_role
-        self.average = (not self.paper_literal) if average is None else bool(average)
-        if normalise is None:
-            normalise = "sample" if self.paper_literal else "set"
-        if normalise not in ("set", "sample"):
-            raise ConfigError(
-                f"{self.name}: normalise must be 'set' or 'sample', got {normalise!r}"
-            )
-        self.normalise = normalise
+        self.average, self.normalise = nlms_options(
+            self.name, self.paper_literal, average, normalise
+        )
         if sigma_w_sdre is None:
             sigma_w_sdre = 5e-3 if self.paper_literal else 0.5
         self.sigma_w_sdre = _check_positive("sigma_w_sdre", sigma_w_sdre)
