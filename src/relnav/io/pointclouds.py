@@ -315,8 +315,22 @@ def _finalize(p: Path, c: _Cloud) -> _Cloud:
     inten = _col(c.intensity)
     times = _col(c.timestamps)
     normals = _col(c.normals, 3)
+    ok = _check_coordinates(p, pts)
+    n_bad = int(n - np.count_nonzero(ok))
+    if n_bad:
+        logger.warning("%s: dropped %d of %d points with NaN/inf coordinates", p, n_bad, n)
+        pts = pts[ok]
+        inten = inten[ok] if inten is not None else None
+        times = times[ok] if times is not None else None
+        normals = normals[ok] if normals is not None else None
+    return _Cloud(pts, inten, times, normals)
+
+
+def _check_coordinates(p: Path, pts: np.ndarray) -> np.ndarray:
+    """Rows of ``pts`` that are finite; raise on absurd coordinates (a misread file), warn on
+    large ones (units?)."""
     ok = np.isfinite(pts).all(axis=1)
-    if n:
+    if len(pts):
         big = float(np.max(np.abs(np.where(ok[:, None], pts, 0.0))))
         if big > ABSURD_COORDINATE:
             raise InputError(
@@ -330,14 +344,7 @@ def _finalize(p: Path, c: _Cloud) -> _Cloud:
                 big,
                 SANE_COORDINATE,
             )
-    n_bad = int(n - np.count_nonzero(ok))
-    if n_bad:
-        logger.warning("%s: dropped %d of %d points with NaN/inf coordinates", p, n_bad, n)
-        pts = pts[ok]
-        inten = inten[ok] if inten is not None else None
-        times = times[ok] if times is not None else None
-        normals = normals[ok] if normals is not None else None
-    return _Cloud(pts, inten, times, normals)
+    return ok
 
 
 def _validate_for_write(
@@ -365,21 +372,7 @@ def _validate_for_write(
         if a.shape != (n,):
             raise InputError(f"{p}: {name} must have shape ({n},), got {a.shape}")
         extras.append(a)
-    ok = np.isfinite(pts).all(axis=1)
-    if n:
-        big = float(np.max(np.abs(np.where(ok[:, None], pts, 0.0))))
-        if big > ABSURD_COORDINATE:
-            raise InputError(
-                f"{p}: coordinates up to {big:.3g} m (limit {ABSURD_COORDINATE:.0e} m): the data "
-                "are misread (wrong extension, SIZE/TYPE or byte order?)"
-            )
-        if big > SANE_COORDINATE:
-            logger.warning(
-                "%s: coordinates up to %.3g m, beyond %.0e m: check the units",
-                p,
-                big,
-                SANE_COORDINATE,
-            )
+    ok = _check_coordinates(p, pts)
     n_bad = int(n - np.count_nonzero(ok))
     if n_bad:
         logger.warning("%s: dropped %d of %d points with NaN/inf coordinates", p, n_bad, n)
