@@ -115,6 +115,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "max_voxels": (1, True, None, False),
     "kernel": (0, False, None, False),
     "kernel_start": (0, False, None, False),
+    "tolerance": (0, False, None, False),
     "kernel_decay": (0, False, 1, True),
     "max_points": (6, True, None, False),
     "max_map_points": (6, True, None, False),

@@ -71,6 +71,10 @@ class NavigatorConfig:
         ``kernel_decay`` each iteration until it reaches ``kernel``.
     max_iter : int
         Gauss–Newton iterations per frame.
+    tolerance : float
+        Stop when an update moves the pose by less than this × the map voxel (translation) and
+        rotates it by less than that length at the scan's median range. 1e-3 measured on the
+        suite: 15 % faster on 128×128 scans, but worse on the sparsest sequences; kept at 1e-4.
     min_points : int
         Scans with fewer finite points are ``failed``.
     max_points : int
@@ -123,6 +127,7 @@ class NavigatorConfig:
     kernel_start: float = 100.0
     kernel_decay: float = 0.6
     max_iter: int = 30
+    tolerance: float = 1e-4
     min_points: int = 6
     max_points: int = 1500
     max_map_points: int = 1500
@@ -504,8 +509,8 @@ class Navigator:
             gate,
             float(c.kernel),
             int(c.max_iter),
-            1e-4 * v,
-            1e-4 * v / max(rng, 1.0),
+            c.tolerance * v,
+            c.tolerance * v / max(rng, 1.0),
             c0=float(c.kernel_start),
             decay=float(c.kernel_decay),
         )
