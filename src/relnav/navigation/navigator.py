@@ -1,27 +1,30 @@
 """relnav's own navigator (method ``relnav``): frame-to-model tracking of a space target.
 
 Each scan is registered to a model of the target accumulated in the target frame from the
-previous scans (:class:`~relnav.navigation.voxel_map.VoxelMap`), by robust generalised ICP
-against the voxels' Gaussians with the motion model's prediction inside the least squares
-(:func:`~relnav.navigation.gicp.solve_scan_to_map`). A static target and a tumbling one are the
-same problem in the target frame: the estimated pose is ``T_target_sensor``.
+previous scans (:class:`~relnav.navigation.voxel_map.VoxelMap`: a fine voxel map whose points carry
+plane-like information from their map neighbours), by robust generalised ICP with the motion
+model's prediction inside the least squares (:func:`~relnav.navigation.gicp.solve_scan_to_map`).
+A static target and a tumbling one are the same problem in the target frame: the estimated pose
+is ``T_target_sensor``.
 
 Per frame ``k``:
 
-1. **Predict** with a constant-velocity SE(3) model: ``T̂_k = T_{k-1} exp(Δt_k/Δt_{k-1} ·
-   log(Δ_{k-1}))``, ``Δ_{k-1} = T_{k-2}⁻¹ T_{k-1}`` (body-frame increment). Its uncertainty is
-   adaptive (as KISS-ICP's threshold): the RMS of the model's recent corrections, in the body
-   frame, floored.
-2. **Register** the scan onto the map from ``T̂_k`` with the prediction as a prior
-   (information ``Λ`` from that uncertainty). Directions the scan cannot fix (a symmetric
-   target about its axis, one flat panel) stay at the prediction instead of drifting.
-3. **Judge** the step from evidence only: too few points or map pairs, too small an overlap
-   (fraction of the scan within the gate), a robust residual far above the map's noise, or a
-   correction inconsistent with the motion model (Mahalanobis χ² beyond ``chi2_gate``) →
-   ``failed``: the pose keeps the prediction and the map is not updated. The scan's own
-   information ``H`` (no prior) gives the degeneracy (smallest eigenvalue of the
-   lever-arm-normalised ``H`` relative to the largest) reported per frame.
-4. **Update** the map with the accepted scan.
+1. **Predict** with the constant-velocity error-state filter of pose and body velocity
+   (:class:`~relnav.navigation.motion.ConstantVelocityFilter`); its pose covariance ``P_pp``
+   is the prior's. Before the first velocity is known, the prior is weak
+   (``sigma_first_t``, ``sigma_first_r_deg``).
+2. **Register** the scan onto the map from the prediction, the prediction's information inside
+   the least squares: directions the scan cannot fix (a symmetric target about its axis, one
+   flat panel) stay with the model instead of drifting.
+3. **Judge** the step from evidence only: too few scan points near the model, an overlap below
+   ``min_overlap``, a degenerate scan information (``min_degeneracy``), or a correction
+   inconsistent with the motion model (χ² beyond ``chi2_gate``) unless a second registration
+   under the weak prior fits the scan as well (``recover_rms_ratio``; then the filter is
+   widened) → ``failed``/``degenerate``: the pose keeps the prediction and the map is not
+   updated.
+4. **Update** the filter with the registered pose and the scan's own information (scaled by
+   the observed residual) and the map with the scan; the fixed-lag smoother
+   (``smooth_lag``) gives :meth:`Navigator.finalize` its trajectory.
 
 Parameters are scale-free (multiples of the first scan's point spacing ``s₀``) and were chosen
 on the navigation suite (``benchmarks/nav_suite.py``), then frozen.
