@@ -1,0 +1,77 @@
+"""The layer order of docs/architecture.md, checked on the imports of every module.
+
+A module may import its own package and the packages *below* it. The imports that still run
+upward are listed in ``KNOWN_UPWARD`` (issue 14 removes them); a new one fails this test, and so
+does a listed one that has gone (so that the list stays true).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "relnav"
+
+LAYERS: list[tuple[str, ...]] = [
+    ("relnav", "errors", "types", "config", "_threads"),  # foundations
+    ("geometry",),
+    ("io",),
+    ("sim",),
+    ("features",),
+    ("matching",),
+    ("estimation",),
+    ("registration",),
+    ("fusion",),
+    ("odometry",),
+    ("navigation",),
+    ("eval",),
+    ("cli",),
+]
+"""Bottom to top; the same order as docs/architecture.md."""
+
+KNOWN_UPWARD: set[tuple[str, str]] = {
+    # (module, imported package) — to be removed by issue 14
+    ("config.py", "io"),  # lazy atomic write
+    ("estimation/icp_refine.py", "registration"),  # ICP kernels live in registration/icp.py
+    ("registration/base.py", "fusion"),  # the registry imports the cross-source methods
+    ("odometry/runner.py", "navigation"),  # make_tracker builds the navigator
+}
+
+
+def _layer(pkg: str) -> int:
+    for i, names in enumerate(LAYERS):
+        if pkg in names:
+            return i
+    raise AssertionError(f"package {pkg!r} is not in LAYERS: add it to docs/architecture.md")
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = set()
+    for node in ast.walk(tree):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        for n in names:
+            parts = n.split(".")
+            if parts[0] == "relnav":
+                out.add(parts[1] if len(parts) > 1 else "relnav")
+    return out
+
+
+def test_no_module_imports_a_package_above_its_own():
+    upward = set()
+    for f in SRC.rglob("*.py"):
+        rel = f.relative_to(SRC)
+        pkg = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        if pkg == "__init__":
+            pkg = "relnav"
+        for imported in _imports(f):
+            if imported != pkg and _layer(imported) > _layer(pkg):
+                upward.add((rel.as_posix(), imported))
+    new = upward - KNOWN_UPWARD
+    assert not new, f"imports running upward (see docs/architecture.md): {sorted(new)}"
+    gone = KNOWN_UPWARD - upward
+    assert not gone, f"fixed, remove from KNOWN_UPWARD: {sorted(gone)}"
