@@ -49,7 +49,7 @@ def dump_yaml(data: dict[str, Any], path: str | Path | None = None) -> str:
     """YAML text of ``data`` (keys in insertion order); also written (atomically) to ``path``."""
     text = yaml.safe_dump(data, sort_keys=False)
     if path is not None:
-        from relnav.io.atomic import atomic_write_text  # lazy: relnav.io imports this module
+        from relnav.atomic import atomic_write_text
 
         atomic_write_text(path, text)
     return text

@@ -869,7 +869,7 @@ ProgressFn = Callable[[int, int, dict[str, Any]], None]
 
 
 def _write_grid(grid: GridSpec, out: Path) -> None:
-    from relnav.io.atomic import atomic_write_text
+    from relnav.atomic import atomic_write_text
 
     data = grid.model_dump(mode="json")
     data["grid_hash"] = grid.grid_hash()

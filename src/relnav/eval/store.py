@@ -239,7 +239,7 @@ class ResultsStore:
     def to_csv(self, path: str | Path, job_ids: Iterable[str] | None = None) -> Path:
         """Write the (selected) rows as CSV, every column; returns the path."""
         rows = self.rows(job_ids)
-        from relnav.io.atomic import atomic_open
+        from relnav.atomic import atomic_open
 
         p = Path(path)
         with atomic_open(p, "w", newline="") as f:

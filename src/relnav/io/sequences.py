@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
+from relnav.atomic import atomic_write_text
 from relnav.config import dump_yaml, load_yaml
 from relnav.errors import ConfigError, InputError
-from relnav.io.atomic import atomic_write_text
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, POINT_WRITE_EXTENSIONS, read_scan
 from relnav.io.pointclouds import write_points as _write_points
 from relnav.io.trajectories import read_tum, write_tum

@@ -146,7 +146,7 @@ def write_tum(path: str | Path, timestamps: np.ndarray, poses: np.ndarray) -> Pa
         q = matrix_to_quat(P[:, :3, :3]).reshape(-1, 4)
         table = np.column_stack([t, P[:, :3, 3], q]).tolist()
         lines = [" ".join(map(repr, r)) + "\n" for r in table]
-    from relnav.io.atomic import atomic_write_text
+    from relnav.atomic import atomic_write_text
 
     atomic_write_text(p, "".join(lines), encoding="ascii")  # a killed writer leaves no half file
     return p

@@ -164,7 +164,7 @@ class _RunWriter:
     no file a later run trusts)."""
 
     def __init__(self, out_dir: str | Path) -> None:
-        from relnav.io.atomic import remove_stale_temps, temp_name
+        from relnav.atomic import remove_stale_temps, temp_name
 
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)

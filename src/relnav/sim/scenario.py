@@ -679,7 +679,7 @@ def simulate(
         Invalid scenario, missing mesh, existing output; a sensor that saw nothing of the
         target in any frame (:class:`InputError`).
     """
-    from relnav.io.atomic import atomic_write_text
+    from relnav.atomic import atomic_write_text
     from relnav.io.sequences import SequenceWriter
     from relnav.sim.targets import get_target
 
