@@ -32,8 +32,6 @@ LAYERS: list[tuple[str, ...]] = [
 KNOWN_UPWARD: set[tuple[str, str]] = {
     # (module, imported package) — to be removed by issue 14
     ("estimation/icp_refine.py", "registration"),  # ICP kernels live in registration/icp.py
-    ("registration/base.py", "fusion"),  # the registry imports the cross-source methods
-    ("odometry/runner.py", "navigation"),  # make_tracker builds the navigator
 }
 
 

@@ -221,6 +221,8 @@ class _RunWriter:
 
 NAVIGATOR_METHOD = "relnav"
 """The method string of relnav's own frame-to-model navigator (:mod:`relnav.navigation`)."""
+NAVIGATOR_CLASS = "relnav.navigation.navigator:Navigator"
+"""Its class, by import path (loaded on first use: the navigator sits above this layer)."""
 
 
 def make_tracker(
@@ -235,9 +237,11 @@ def make_tracker(
     Both have ``register_frame(scan) -> OdometryStep``.
     """
     if isinstance(method, str) and method.strip().lower() == NAVIGATOR_METHOD:
-        from relnav.navigation import Navigator
+        import importlib
 
-        return Navigator(initial_pose=initial_pose, **method_options)
+        module, _, cls = NAVIGATOR_CLASS.partition(":")
+        navigator = getattr(importlib.import_module(module), cls)
+        return navigator(initial_pose=initial_pose, **method_options)
     return Odometry(method, initial_pose=initial_pose, motion_prior=motion_prior, **method_options)
 
 

@@ -73,11 +73,27 @@ def register_method(
     return deco
 
 
+METHOD_MODULES: tuple[str, ...] = (
+    "relnav.registration.feature",
+    "relnav.registration.clgv",
+    "relnav.registration.icp",
+    "relnav.registration.sparse_icp",
+    "relnav.registration.super4pcs",
+    "relnav.registration.external",
+    "relnav.registration.kiss_matcher",
+    "relnav.fusion.cross_source",
+    "relnav.fusion.cbd",
+)
+"""Modules whose import registers method families, by import path: loaded on first use, so
+that this lower layer never imports a higher one (``relnav.fusion`` registers paper 2's
+cross-source methods here)."""
+
+
 def _load_all() -> None:
-    # Importing a family module registers its methods.
-    import relnav.registration.kiss_matcher  # noqa: F401
-    from relnav.fusion import cbd, cross_source  # noqa: F401
-    from relnav.registration import clgv, external, feature, icp, sparse_icp, super4pcs  # noqa: F401
+    import importlib
+
+    for name in METHOD_MODULES:
+        importlib.import_module(name)
 
 
 def available_methods() -> dict[str, dict[str, Any]]:
