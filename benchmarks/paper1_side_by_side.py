@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from relnav.eval.paper1_reference import (
+from relnav.bench.paper1_reference import (
     PAPER_COMPETITORS,
     PAPER_DESCRIPTORS,
     PAPER_FILTERS,

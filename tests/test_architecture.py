@@ -25,6 +25,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("odometry",),
     ("navigation",),
     ("eval",),
+    ("bench",),
     ("cli",),
 ]
 """Bottom to top; the same order as docs/architecture.md."""

@@ -10,8 +10,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from relnav.errors import ConfigError
-from relnav.eval.benchmark import (
+from relnav.bench.benchmark import (
     GridSpec,
     expand_jobs,
     expand_methods,
@@ -19,8 +18,9 @@ from relnav.eval.benchmark import (
     load_grid,
     run_benchmark,
 )
+from relnav.bench.store import ResultsStore
+from relnav.errors import ConfigError
 from relnav.eval.metrics import METRIC_KEYS
-from relnav.eval.store import ResultsStore
 
 TINY = {
     "name": "tiny",

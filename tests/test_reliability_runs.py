@@ -274,7 +274,7 @@ def test_sigkill_odometry_then_rerun(tmp_path):
 
 
 def test_sigkill_benchmark_then_rerun_loses_nothing(tmp_path):
-    from relnav.eval.store import ResultsStore
+    from relnav.bench.store import ResultsStore
 
     n = 30
     grid = tmp_path / "grid.yaml"

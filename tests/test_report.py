@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from relnav.bench import paper1_reference as ref
+from relnav.bench.benchmark import load_grid, run_benchmark
+from relnav.bench.report import aggregate, classify_method, normalised_ert, write_report
+from relnav.bench.store import ResultsStore
 from relnav.errors import InputError
-from relnav.eval import paper1_reference as ref
-from relnav.eval.benchmark import load_grid, run_benchmark
-from relnav.eval.report import aggregate, classify_method, normalised_ert, write_report
-from relnav.eval.store import ResultsStore
 
 GRID = {
     "name": "report-test",
@@ -204,7 +204,7 @@ def test_paper_reference_tables():
 
 
 def test_export_report_compresses_figures(bench, tmp_path):
-    from relnav.eval.report import export_report
+    from relnav.bench.report import export_report
 
     md = export_report(bench, tmp_path / "docs")
     text = md.read_text()

@@ -7,9 +7,9 @@ import sqlite3
 
 import pytest
 
+from relnav.bench.store import COLUMNS, ResultsStore
 from relnav.errors import InputError
 from relnav.eval.metrics import METRIC_KEYS
-from relnav.eval.store import COLUMNS, ResultsStore
 
 
 def _row(job_id: str, status: str = "ok", **kw: object) -> dict:

@@ -55,14 +55,14 @@ def benchmark(
 
     from rich.table import Table
 
-    from relnav.eval.benchmark import STORE_FILE, expand_jobs, load_grid, run_benchmark
+    from relnav.bench.benchmark import STORE_FILE, expand_jobs, load_grid, run_benchmark
 
     g = load_grid(
         grid, seeds=seeds, max_frames=max_frames, scenarios=scenario or None, methods=method or None
     )
     jobs = expand_jobs(g)
     if dry_run:
-        from relnav.eval.store import ResultsStore
+        from relnav.bench.store import ResultsStore
 
         done: set[str] = set()
         if (out / STORE_FILE).is_file():
@@ -116,7 +116,7 @@ def benchmark(
         highlight=False,
     )
     if report:
-        from relnav.eval.report import write_report
+        from relnav.bench.report import write_report
 
         p = write_report(out)
         console.print(f"wrote {p}", highlight=False)
@@ -136,8 +136,8 @@ def report(
     Examples: [bold]relnav report bench/quick[/],
     [bold]relnav report bench/full --export docs/results/paper1-full[/]
     """
-    from relnav.eval.benchmark import load_grid
-    from relnav.eval.report import export_report, write_report
+    from relnav.bench.benchmark import load_grid
+    from relnav.bench.report import export_report, write_report
 
     p = write_report(out, grid=None if grid is None else load_grid(grid))
     console.print(f"wrote {p}", highlight=False)

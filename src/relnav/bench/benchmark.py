@@ -9,7 +9,7 @@ How a grid runs (:func:`run_benchmark`):
 
 1. Jobs are expanded and identified by :func:`job_id`, a hash of everything that determines
    their result (scenario spec, seed, nuisance, method, options). Jobs already in the results
-   store (:mod:`relnav.eval.store`) with status ``ok`` or ``failed`` are skipped, so a killed
+   store (:mod:`relnav.bench.store`) with status ``ok`` or ``failed`` are skipped, so a killed
    run resumes where it stopped; ``force=True`` reruns everything, ``retry_failed=True`` reruns
    failed jobs.
 2. Each (scenario, seed) sequence is simulated **once** into ``OUT/sequences/`` and reused by
@@ -212,7 +212,7 @@ class SweepSpec(StrictModel):
 
 
 class ReportOptions(StrictModel):
-    """Options of the report written from a grid (see :mod:`relnav.eval.report`).
+    """Options of the report written from a grid (see :mod:`relnav.bench.report`).
 
     Attributes
     ----------
@@ -952,7 +952,7 @@ def _run_locked(
     retry_failed: bool,
     progress: ProgressFn | None,
 ) -> BenchmarkSummary:
-    from relnav.eval.store import ResultsStore
+    from relnav.bench.store import ResultsStore
 
     _write_grid(grid, out)
     jobs = expand_jobs(grid)

@@ -4,7 +4,7 @@ A benchmark folder holds ``results.sqlite`` with two tables:
 
 ``jobs``
     One row per (scenario, nuisance, method, seed) job, keyed by ``job_id`` (a hash of
-    everything that determines the result, see :func:`relnav.eval.benchmark.job_id`): grid
+    everything that determines the result, see :func:`relnav.bench.benchmark.job_id`): grid
     hash, scenario, method, seed, nuisance, status (``ok`` / ``failed``), error, every metric of
     :data:`relnav.eval.metrics.METRIC_KEYS` as a column, per-stage mean times (ms), points per
     scan, package version, host/worker and timestamps. Each :meth:`ResultsStore.put` is its

@@ -1,6 +1,6 @@
 """Paper 1's published results, transcribed from its Appendix A and Tables 3–6 and B1.
 
-Used by :mod:`relnav.eval.report` for the section "against the paper". Numbers are exactly as
+Used by :mod:`relnav.bench.report` for the section "against the paper". Numbers are exactly as
 printed (including the paper's oddities, see Notes); nothing here is computed by relnav.
 
 Method keys follow relnav's method strings: ``"feature:<descriptor>+gcc+<filter>"`` for the
@@ -136,7 +136,7 @@ class PaperClaim:
     Attributes
     ----------
     key : str
-        Identifier used by :mod:`relnav.eval.report`.
+        Identifier used by :mod:`relnav.bench.report`.
     text : str
         The claim, paraphrased.
     where : str

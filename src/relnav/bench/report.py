@@ -13,7 +13,7 @@ estimates and sequences) and writes, in the layout of Paper 1:
 - **figures**: trajectories (best per filter, competitors) and per-axis errors per scenario,
   normalised e^RT vs time (Fig. 14), time vs points per scan (Fig. 15), normalised e^RT per
   filter (Fig. 16), error-vs-nuisance curves for the robustness sweeps;
-- **against the paper**: our best values beside Paper 1's (:mod:`relnav.eval.paper1_reference`)
+- **against the paper**: our best values beside Paper 1's (:mod:`relnav.bench.paper1_reference`)
   and whether its qualitative conclusions hold here.
 
 Normalisation (Paper 1 §4) **[interpretation]**: per scenario, the least accurate descriptor
@@ -41,9 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from relnav.errors import InputError
-from relnav.eval import paper1_reference as ref
-from relnav.eval.benchmark import (
+from relnav.bench import paper1_reference as ref
+from relnav.bench.benchmark import (
     GRID_FILE,
     RUNS_LOG,
     STORE_FILE,
@@ -51,6 +50,7 @@ from relnav.eval.benchmark import (
     expand_jobs,
     read_grid,
 )
+from relnav.errors import InputError
 
 __all__ = [
     "APPENDIX_COLUMNS",
@@ -629,8 +629,8 @@ def _nan_last(v: float) -> float:
 
 
 def _scenario_figures(ctx: _Ctx, scn: str) -> list[Path]:
+    from relnav.bench.report_plots import plot_axis_errors, plot_trajectory_panels
     from relnav.eval.metrics import pose_errors
-    from relnav.eval.report_plots import plot_axis_errors, plot_trajectory_panels
 
     seed = ctx.grid.report.plot_seed
     seed = ctx.grid.seeds[0] if seed is None else seed
@@ -852,7 +852,7 @@ def _section_normalised(ctx: _Ctx) -> dict[str, dict[str, Any]]:
             ],
         )
     )
-    from relnav.eval.report_plots import (
+    from relnav.bench.report_plots import (
         plot_filter_scores,
         plot_normalised_ert_vs_time,
         plot_time_vs_points,
@@ -1369,7 +1369,7 @@ _NEUTRAL = {
 
 
 def _section_robustness(ctx: _Ctx) -> None:
-    from relnav.eval.report_plots import plot_nuisance_curves
+    from relnav.bench.report_plots import plot_nuisance_curves
 
     if not ctx.grid.sweeps:
         return
@@ -1503,7 +1503,7 @@ def write_report(out_dir: str | Path, *, grid: GridSpec | None = None) -> Path:
     InputError
         Not a benchmark folder, or no job of the grid in the store.
     """
-    from relnav.eval.store import ResultsStore
+    from relnav.bench.store import ResultsStore
 
     given = Path(out_dir)  # the folder as the user wrote it, for the regenerate hint
     out = given.resolve()
