@@ -51,19 +51,22 @@ def test_recovers_a_large_rigid_transform(seed: int) -> None:
     dt_i, dr_i = _errors(T, ri.T_target_source)
     assert dt_i < 0.01 and dr_i < 0.2, (dt_i, dr_i)
     assert dt_i < dt  # the refinement improves on the global estimate
-    np.testing.assert_array_equal(ri.info["T_kiss_matcher"], r.info["T_kiss_matcher"])
+    # KISS-Matcher's threads make its result vary slightly between calls (±1 inlier seen in CI)
+    np.testing.assert_allclose(ri.info["T_kiss_matcher"], r.info["T_kiss_matcher"], atol=1e-2)
     assert ri.info["method"] == "kiss-matcher-icp" and "icp_iterate" in ri.timings
 
 
-def test_initial_guess_is_ignored_and_result_is_deterministic() -> None:
+def test_initial_guess_is_ignored_and_result_is_repeatable() -> None:
+    """The guess changes nothing; repeated calls agree to well under the voxel (KISS-Matcher's
+    own threads make it vary slightly: ±1 inlier between calls was seen on CI)."""
     source, target, _ = _pair(3)
     reg = get_registration("kiss-matcher")
     a = reg.register(source, target)
     b = reg.register(source, target, init=exp_se3(np.r_[5.0, -3.0, 1.0, 0.3, -0.2, 0.9]))
     c = get_registration("kiss-matcher").register(source, target)
     assert a.status == b.status == c.status == "ok"
-    np.testing.assert_array_equal(a.T_target_source, b.T_target_source)
-    np.testing.assert_array_equal(a.T_target_source, c.T_target_source)
+    np.testing.assert_allclose(a.T_target_source, b.T_target_source, atol=1e-2)
+    np.testing.assert_allclose(a.T_target_source, c.T_target_source, atol=1e-2)
 
 
 def test_absolute_voxel_size_option() -> None:
@@ -144,11 +147,12 @@ def test_too_few_inliers_is_failed() -> None:
     ok = get_registration("kiss-matcher").register(source, target)
     n = ok.info["km_final_inliers"]
     for method in ("kiss-matcher", "kiss-matcher-icp"):
-        r = get_registration(method, min_inliers=n + 1).register(source, target)
-        assert r.status == "failed" and f"{n} inliers" in r.message, r.message
+        # far above n: the library's count varies by about one inlier between calls
+        r = get_registration(method, min_inliers=10 * n + 100).register(source, target)
+        assert r.status == "failed" and f"inliers (< {10 * n + 100})" in r.message, r.message
         np.testing.assert_array_equal(r.T_target_source, np.eye(4))
-        np.testing.assert_array_equal(
-            r.info["T_kiss_matcher"], ok.info["T_kiss_matcher"]
+        np.testing.assert_allclose(
+            r.info["T_kiss_matcher"], ok.info["T_kiss_matcher"], atol=1e-2
         )  # the rejected estimate stays inspectable
 
 

@@ -52,7 +52,9 @@ KISS-Matcher stage in ``info["kiss_matcher"]`` and its estimate in ``info["T_kis
 **Threads and determinism.** The library runs its stages on TBB/OpenMP threads (no Python
 control over their number). Its matching is deterministic (mutual nearest neighbours, at most
 ``num_max_corr`` pairs kept by the ratio test, sorted), and relnav's voxelisation is too; a
-fresh matcher is built for every call, so the same clouds give the same transform.
+fresh matcher is built for every call. Still, on the 2-core CI machine the same clouds gave
+final inlier counts one apart between calls, so the transform is repeatable only to well under
+the voxel, not bit for bit (measured; the tests allow for it).
 """
 
 from __future__ import annotations
