@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -153,6 +153,20 @@ def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
     if len(P) <= budget:
         return P
     return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
+
+
+def _rms_radius(P: np.ndarray) -> float:
+    """RMS distance of the points from their centroid (m): the scan's lever arm."""
+    return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+
+
+def _left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
+    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
+    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``)."""
+    Ad = adjoint(T)
+    S = Ad @ S_body @ Ad.T
+    L = np.linalg.pinv(0.5 * (S + S.T))
+    return 0.5 * (L + L.T)
 
 
 def _spacing(P: np.ndarray) -> float:
@@ -357,8 +371,7 @@ class Navigator:
         )
         Pm = _even_subset(P, c.max_map_points)
         self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-        radius = float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
-        st0 = c.sigma_first_t * max(radius, self.spacing0)
+        st0 = c.sigma_first_t * max(_rms_radius(P), self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
         sa_t = c.sigma_acc_t * self.spacing0
         sa_r = math.radians(c.sigma_acc_r_deg)
@@ -399,17 +412,15 @@ class Navigator:
             )
         ts = time.perf_counter()
         rng = float(np.median(np.linalg.norm(P, axis=1)))
+        radius = max(_rms_radius(P), self.spacing0)
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
-        Ad = adjoint(T_pred)
-        S_left = Ad @ P_pp @ Ad.T
-        Lam = np.linalg.pinv(0.5 * (S_left + S_left.T))
-        Lam = 0.5 * (Lam + Lam.T)
+        Lam = _left_information(T_pred, P_pp)
         v = self.map.voxel_size
         motion = 3.0 * (float(np.linalg.norm(sigma[:3])) + float(np.linalg.norm(sigma[3:])) * rng)
         gate = float(max(motion, 2.0 * v))
         timings["prepare"] = time.perf_counter() - ts
         ts = time.perf_counter()
-        fit = self._solve(P, T_pred, Lam, gate, rng)
+        fit = self._solve(P, T_pred, Lam, gate, rng, radius)
         recovered = False
         if fit["chi2"] > c.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an
@@ -417,7 +428,7 @@ class Navigator:
             # frame's weak prior; keep that answer only if the scan supports it as well.
             weak = self._weak_prior(T_pred)
             gate_w = float(max(gate, 3.0 * self._first_sigma[0]))
-            alt = self._solve(P, T_pred, weak, gate_w, rng)
+            alt = self._solve(P, T_pred, weak, gate_w, rng, radius)
             if (
                 alt["usable"]
                 and alt["cond"] >= c.min_degeneracy
@@ -488,16 +499,19 @@ class Navigator:
     def _weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
         """Information (left, target frame) of the first frame's weak motion prior."""
         st, sr = self._first_sigma
-        Sb = np.diag([st**2] * 3 + [sr**2] * 3)
-        Ad = adjoint(T_pred)
-        S = Ad @ Sb @ Ad.T
-        L = np.linalg.pinv(0.5 * (S + S.T))
-        return 0.5 * (L + L.T)
+        return _left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
 
     def _solve(
-        self, P: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray, gate: float, rng: float
+        self,
+        P: np.ndarray,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
     ) -> dict[str, Any]:
-        """One registration onto the map and its quality figures."""
+        """One registration onto the map and its quality figures (``rng``: the scan's median
+        range, ``radius``: its lever arm, both m)."""
         c = self.config
         assert self.map is not None
         v = self.map.voxel_size
@@ -521,7 +535,6 @@ class Navigator:
         has = fit.d2 >= 0
         inl = has & (fit.d2 < 9.0)
         xi = log_se3(fit.T @ invert(T_pred))
-        radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), self.spacing0)
         # degeneracy: eigenvalues of H with rotations scaled by the lever arm
         sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
         Hs = fit.H * sc[:, None] * sc[None, :]
@@ -559,7 +572,3 @@ class Navigator:
             log.warning("smoother returned %d poses for %d frames", len(poses), len(online))
             return np.stack(online)
         return np.stack(poses)
-
-    def config_dict(self) -> dict[str, Any]:
-        """The options in use."""
-        return asdict(self.config)
