@@ -115,8 +115,6 @@ def write_run_outputs(
     gt = seq.gt_poses
     n = len(run.poses)
     if gt is not None and n >= 2:
-        from relnav.cli.evaluate import json_safe
-
         metrics = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])
         metrics.update(
             time_ms=run.median_time_ms,
@@ -125,7 +123,6 @@ def write_run_outputs(
             method=run.method,
             preset=preset,
         )
-        (out / "metrics.json").write_text(json.dumps(json_safe(metrics), indent=2) + "\n")
         outputs.append("metrics.json")
         if errors_plot:
             from relnav.eval.metrics import match_trajectories
@@ -145,10 +142,11 @@ def write_run_outputs(
     if run.method == "relnav" and len(frames) >= 3:
         gt_n = gt[:n] if gt is not None else None
         outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames)
-        if metrics:
-            from relnav.cli.evaluate import json_safe
+    if metrics:  # once, with the state's figures when there are some
+        from relnav.atomic import atomic_write_text
+        from relnav.cli.evaluate import json_safe
 
-            (out / "metrics.json").write_text(json.dumps(json_safe(metrics), indent=2) + "\n")
+        atomic_write_text(out / "metrics.json", json.dumps(json_safe(metrics), indent=2) + "\n")
     if seed is None:  # a simulated sequence records its scenario's seed
         scenario = getattr(seq, "scenario", None)
         seed = scenario.get("seed") if isinstance(scenario, dict) else None
