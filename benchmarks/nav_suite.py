@@ -68,6 +68,25 @@ def _ellipse(a: float, b: float, loops: float, tilt: float, frames: int) -> dict
     }
 
 
+def _helical(r0: float, r1: float, h0: float, h1: float, turns: float) -> dict[str, Any]:
+    """A helical approach from radius ``r0`` to ``r1`` (m), height ``h0`` to ``h1`` (m), in 150
+    frames 10 s apart."""
+    return {
+        "frames": 150,
+        "dt": 10.0,
+        "trajectory": {
+            "kind": "helical-approach",
+            "params": {
+                "radius_start": r0,
+                "radius_end": r1,
+                "height_start": h0,
+                "height_end": h1,
+                "turns": turns,
+            },
+        },
+    }
+
+
 def suite() -> dict[str, dict[str, Any]]:
     """The suite's scenarios by name (dicts for :func:`relnav.sim.simulate`)."""
     s: dict[str, dict[str, Any]] = {}
@@ -85,18 +104,7 @@ def suite() -> dict[str, dict[str, Any]]:
     s["iridium-helical-64"] = {
         "target": {"name": "iridium", "scale_to": 10.0},
         "sensors": [_flash(64)],
-        "frames": 150,
-        "dt": 10.0,
-        "trajectory": {
-            "kind": "helical-approach",
-            "params": {
-                "radius_start": 55.0,
-                "radius_end": 35.0,
-                "height_start": 30.0,
-                "height_end": 0.0,
-                "turns": 1.0,
-            },
-        },
+        **_helical(55.0, 35.0, 30.0, 0.0, 1.0),
     }
     s["orion-inclined-64"] = {
         # the capsule's symmetry axis is y; the inspection ellipse is inclined 35° to it
@@ -130,18 +138,7 @@ def suite() -> dict[str, dict[str, Any]]:
     s["asteroid-helical-128"] = {
         "target": {"name": "asteroid", "scale_to": 14.0},
         "sensors": [_flash(128)],
-        "frames": 150,
-        "dt": 10.0,
-        "trajectory": {
-            "kind": "helical-approach",
-            "params": {
-                "radius_start": 60.0,
-                "radius_end": 40.0,
-                "height_start": -25.0,
-                "height_end": 5.0,
-                "turns": 1.25,
-            },
-        },
+        **_helical(60.0, 40.0, -25.0, 5.0, 1.25),
     }
     return _finish(s)
 
@@ -159,18 +156,7 @@ def holdout() -> dict[str, dict[str, Any]]:
         "target": _mesh("voyager", "voyager", 12.3),
         "sensors": [_flash(64)],
         "seed": 12,
-        "frames": 150,
-        "dt": 10.0,
-        "trajectory": {
-            "kind": "helical-approach",
-            "params": {
-                "radius_start": 58.0,
-                "radius_end": 38.0,
-                "height_start": 20.0,
-                "height_end": -10.0,
-                "turns": 1.0,
-            },
-        },
+        **_helical(58.0, 38.0, 20.0, -10.0, 1.0),
     }
     s["aura-tumble-64"] = {
         "target": _mesh("aura", "envisat", 16.0),
