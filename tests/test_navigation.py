@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from relnav.geometry.se3 import exp_se3, invert, log_se3
+from relnav.geometry.se3 import adjoint, exp_se3, invert, log_se3
 from relnav.navigation import Navigator, VoxelMap
-from relnav.navigation.motion import ConstantVelocityFilter, adjoint
+from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.odometry import run_sequence
 from relnav.sim.scenario import simulate
 

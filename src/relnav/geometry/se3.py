@@ -13,6 +13,7 @@ from relnav.errors import InputError
 from relnav.geometry.rotations import hat, matrix_to_rotvec, rotvec_to_matrix
 
 __all__ = [
+    "adjoint",
     "compose",
     "exp_se3",
     "from_rt",
@@ -103,6 +104,17 @@ def log_se3(T: np.ndarray) -> np.ndarray:
     phi = matrix_to_rotvec(T[:3, :3])
     rho = _left_jacobian_inv(phi) @ T[:3, 3]
     return np.concatenate([rho, phi])
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """Adjoint ``(6, 6)`` of ``T`` for twists ordered ``[ρ, φ]``: ``T exp(ξ) = exp(Ad_T ξ) T``,
+    i.e. ``[[R, [t]×R], [0, R]]``."""
+    R, t = T[:3, :3], T[:3, 3]
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[:3, 3:] = hat(t) @ R
+    A[3:, 3:] = R
+    return A
 
 
 def random_transform(

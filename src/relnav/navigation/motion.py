@@ -20,21 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from relnav.geometry.se3 import invert
+from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.lie import exp_se3, log_se3
 
-__all__ = ["ConstantVelocityFilter", "adjoint"]
-
-
-def adjoint(T: np.ndarray) -> np.ndarray:
-    """SE(3) adjoint for twists ``[ρ, φ]``: ``[[R, [t]×R], [0, R]]`` (6×6)."""
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[:3, 3:] = tx @ R
-    A[3:, 3:] = R
-    return A
+__all__ = ["ConstantVelocityFilter"]
 
 
 class ConstantVelocityFilter:

@@ -41,10 +41,10 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.geometry.se3 import invert
+from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
 from relnav.navigation.lie import log_se3
-from relnav.navigation.motion import ConstantVelocityFilter, adjoint
+from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult

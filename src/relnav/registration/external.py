@@ -72,6 +72,7 @@ import numpy as np
 
 from relnav.errors import ConfigError
 from relnav.geometry.rotations import hat, rotation_angle
+from relnav.geometry.se3 import adjoint
 from relnav.registration.base import register_method
 from relnav.registration.icp import PreparedCloud, check_init, prepare_cloud
 from relnav.registration.result import RegistrationResult, RegistrationStatus
@@ -146,16 +147,6 @@ def _total(t: dict[str, float]) -> float:
     return float(sum(t.values()))
 
 
-def _adjoint(T: np.ndarray) -> np.ndarray:
-    """Adjoint of ``T`` for twists ordered ``[ρ, φ]``: ``T exp(ξ) = exp(Ad_T ξ) T``."""
-    R, t = T[:3, :3], T[:3, 3]
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[:3, 3:] = hat(t) @ R
-    A[3:, 3:] = R
-    return A
-
-
 def twist_covariance_from_hessian(H: np.ndarray, T: np.ndarray) -> np.ndarray | None:
     """Covariance of relnav's twist from a small_gicp Hessian.
 
@@ -185,7 +176,7 @@ def twist_covariance_from_hessian(H: np.ndarray, T: np.ndarray) -> np.ndarray | 
     C_rot_first = (V / lam) @ V.T
     perm = np.r_[3:6, 0:3]
     C_right = C_rot_first[np.ix_(perm, perm)]
-    A = _adjoint(T)
+    A = adjoint(T)
     C = A @ C_right @ A.T
     return 0.5 * (C + C.T)
 
