@@ -13,7 +13,7 @@ from pathlib import Path
 SRC = Path(__file__).resolve().parents[1] / "src" / "relnav"
 
 LAYERS: list[tuple[str, ...]] = [
-    ("relnav", "errors", "types", "config", "atomic", "_threads"),  # foundations
+    ("relnav", "errors", "scan", "config", "atomic", "_threads"),  # foundations
     ("geometry",),
     ("io",),
     ("sim",),
@@ -73,3 +73,18 @@ def test_no_module_imports_a_package_above_its_own():
     assert not new, f"imports running upward (see docs/architecture.md): {sorted(new)}"
     gone = KNOWN_UPWARD - upward
     assert not gone, f"fixed, remove from KNOWN_UPWARD: {sorted(gone)}"
+
+
+def test_no_module_shadows_the_standard_library():
+    """A script run from inside ``src/relnav/...`` has that folder first on ``sys.path``: a module
+    named like a standard one (``types.py`` was) would then replace it and break imports.
+
+    The ``io`` *package* is exempt: ``io`` is imported while the interpreter starts, before
+    ``sys.path`` is read, so a folder of that name cannot replace it.
+    """
+    import sys
+
+    names = {p.stem for p in SRC.rglob("*.py") if p.stem != "__init__"}
+    names |= {p.name for p in SRC.rglob("*") if p.is_dir() and p.name != "__pycache__"}
+    clashes = sorted((names & set(sys.stdlib_module_names)) - {"io"})
+    assert not clashes, f"modules named like the standard library: {clashes}"

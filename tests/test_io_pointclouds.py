@@ -19,7 +19,7 @@ from relnav.io import (
     write_points,
     write_scan,
 )
-from relnav.types import Scan
+from relnav.scan import Scan
 
 # Largest coordinate error allowed per format for |x| <= ~40 m (precision of the stored type).
 F32 = 40.0 * 2.0**-23  # float32 relative precision at 40 m

@@ -20,7 +20,7 @@ from relnav.io import (
     write_sequence,
     write_tum,
 )
-from relnav.types import Scan
+from relnav.scan import Scan
 
 
 @pytest.fixture

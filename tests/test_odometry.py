@@ -9,7 +9,7 @@ from relnav.geometry import invert, random_transform, rotation_angle, transform_
 from relnav.geometry.se3 import exp_se3
 from relnav.odometry import Odometry, run_sequence
 from relnav.registration import RegistrationResult, get_registration
-from relnav.types import Scan
+from relnav.scan import Scan
 
 
 class _Oracle:

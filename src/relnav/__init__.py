@@ -10,7 +10,7 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from relnav.errors import ConfigError, EstimationError, InputError, RelnavError
-from relnav.types import Scan
+from relnav.scan import Scan
 
 try:
     __version__ = version("relnav")

@@ -1,7 +1,7 @@
 """Recordings in: ROS 1 bags, ROS 2 bags (sqlite3 ``.db3``) and MCAP files, read with ``rosbags``.
 
 :class:`BagSequence` exposes the ``sensor_msgs/PointCloud2`` messages of one topic as a sequence
-of :class:`~relnav.types.Scan` (points in the message's frame, metres), like
+of :class:`~relnav.scan.Scan` (points in the message's frame, metres), like
 :class:`relnav.io.ScanSequence`: ``len(seq)``, ``seq[i]``, ``seq.timestamps``, ``seq.gt_poses``
 (always ``None``: a recording has no ground truth). No ROS installation is needed; the reader
 is the optional dependency ``rosbags`` (extra ``[ros]``).
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from relnav.errors import ConfigError, InputError
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = ["BAG_SUFFIXES", "BagSequence", "decode_pointcloud2", "is_recording"]
 

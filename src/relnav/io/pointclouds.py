@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from relnav.errors import InputError
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = [
     "ABSURD_COORDINATE",
@@ -146,7 +146,7 @@ def read_points(path: str | Path) -> np.ndarray:
 
 
 def read_scan(path: str | Path, time: float = 0.0, *, sensor: dict | None = None) -> Scan:
-    """Read a point-cloud file as a :class:`relnav.types.Scan`.
+    """Read a point-cloud file as a :class:`relnav.scan.Scan`.
 
     Parameters
     ----------

@@ -38,7 +38,7 @@ from relnav.errors import ConfigError, InputError
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, POINT_WRITE_EXTENSIONS, read_scan
 from relnav.io.pointclouds import write_points as _write_points
 from relnav.io.trajectories import read_tum, write_tum
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = [
     "ScanSequence",

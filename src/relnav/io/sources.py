@@ -11,7 +11,7 @@ Accepted inputs (checked in this order):
 - any plain folder of point-cloud files (sorted by natural name order, times ``0, 1, 2, …``
   unless a ``timestamps.txt`` or ``times.txt`` sits next to them) → :class:`FileSequence`.
 
-Every returned object has ``len``, ``seq[i]`` (a :class:`~relnav.types.Scan`), ``timestamps``,
+Every returned object has ``len``, ``seq[i]`` (a :class:`~relnav.scan.Scan`), ``timestamps``,
 ``gt_poses`` (or ``None``), ``source_files`` and ``describe()``.
 """
 
@@ -30,7 +30,7 @@ from relnav.io.bags import BagSequence, is_recording
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, read_scan
 from relnav.io.sequences import _natural_key, _read_timestamps
 from relnav.io.trajectories import read_kitti
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = ["FileSequence", "content_hash", "open_sequence", "read_kitti_calib_tr"]
 

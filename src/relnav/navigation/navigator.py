@@ -48,7 +48,7 @@ from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = ["Navigator", "NavigatorConfig"]
 

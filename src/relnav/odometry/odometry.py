@@ -29,7 +29,7 @@ from relnav.geometry.se3 import invert
 from relnav.io.pointclouds import ABSURD_COORDINATE
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = ["MotionPrior", "Odometry", "OdometryStep"]
 

@@ -15,7 +15,7 @@ from relnav._threads import limit_blas_threads
 from relnav.errors import InputError
 from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
 from relnav.registration.base import Registration
-from relnav.types import Scan
+from relnav.scan import Scan
 
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
