@@ -114,15 +114,29 @@ def test_spin_bilinear_split_and_nearest() -> None:
 
 
 def test_spin_pcl_layout_nodes() -> None:
-    r = 0.8  # width 8 → node spacing 0.1, α nodes 0..0.8, β nodes -0.8..0.8
-    P, N = _star(r, [0.2, 0.25, 0.5, 0.4], [0.0, 0.3, -0.5, 0.15])
+    # PCL: node spacing r/(w√2) = 0.1, α nodes 0..0.8, β nodes -0.8..0.8, cylinder α, |β| < 0.8
+    r = 0.8 * np.sqrt(2.0)
+    g = spin_grid(r, layout="pcl", width=8)
+    assert g.da == pytest.approx(0.1) and g.b0 == pytest.approx(-0.8) and g.pcl
+    # last two points are inside the sphere but outside the cylinder: dropped
+    P, N = _star(r, [0.2, 0.25, 0.5, 0.4, 0.85, 0.1], [0.0, 0.3, -0.5, 0.15, 0.0, 0.9])
     img = spin(P, np.array([0]), radius=r, normals=N, layout="pcl", width=8)[0]
     assert img.shape == (153,)
-    img = img.reshape(17, 9)
-    assert img[8, 0] == pytest.approx(0.2, abs=1e-6)  # keypoint at node (β=0, α=0)
-    assert img[8, 2] == pytest.approx(0.2, abs=1e-6)  # (β=0, α=0.2) exactly on a node
-    np.testing.assert_allclose(img[11, 2:4], [0.1, 0.1], atol=1e-6)  # α=0.25 split in half
+    img = img.reshape(9, 17)  # α-major as PCL
+    assert img[0, 8] == pytest.approx(0.0, abs=1e-6)  # the keypoint itself is skipped
+    assert img[2, 8] == pytest.approx(0.25, abs=1e-6)  # (α=0.2, β=0) exactly on a node
+    np.testing.assert_allclose(img[2:4, 11], [0.125, 0.125], atol=1e-6)  # α=0.25 split in half
+    np.testing.assert_allclose(img[5, 3], 0.25, atol=1e-6)  # (α=0.5, β=-0.5)
     assert img.sum() == pytest.approx(1.0, abs=1e-6)
+    # support angle: PCL keeps opposite normals (|cos|), the "guo" layout does not
+    N2 = N.copy()
+    N2[1] *= -1.0
+    flip = spin(P, np.array([0]), radius=r, normals=N2, layout="pcl", support_angle_deg=10.0)
+    np.testing.assert_allclose(flip[0], img.ravel(), atol=1e-6)
+    guo = spin(P, np.array([0]), radius=r, normals=N2, support_angle_deg=10.0)[0]
+    assert np.isfinite(guo).all() and not np.allclose(
+        guo, spin(P, np.array([0]), radius=r, normals=N, support_angle_deg=10.0)[0]
+    )
 
 
 def test_trisi_blocks_equal_spin_around_lrf_axes(surface) -> None:

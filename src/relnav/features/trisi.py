@@ -1,28 +1,37 @@
 """TriSI (Guo et al. 2013) and spin images (Johnson & Hebert 1999).
 
 Both are built by one spin-image kernel. For a keypoint ``p``, a unit axis ``a`` and a support
-point ``q`` (``‖q − p‖ ≤ r``, keypoint included), ``v = q − p`` has spin coordinates
-``β = a·v`` (signed height along the axis) and ``α = sqrt(‖v‖² − β²)`` (distance to the axis).
+point ``q`` (``‖q − p‖ ≤ r``), ``v = q − p`` has spin coordinates ``β = a·v`` (signed height
+along the axis) and ``α = sqrt(‖v‖² − β²)`` (distance to the axis).
 
-Binning (**[interpretation]**, ALGORITHMS §A.5):
+Two binning conventions (``layout``):
 
-* ``layout="guo"`` (default; 15 × 15 = 225 as in Guo et al. 2016's evaluation and Paper 1's
-  TriSI length 675 = 3 × 225): ``n_alpha`` cells over ``α ∈ [0, r)`` (size ``r/n_alpha``) and
-  ``n_beta`` cells over ``β ∈ [−r, r)`` (size ``2r/n_beta``). Bilinear interpolation between
+* ``layout="guo"`` (default; **[interpretation]**, ALGORITHMS §A.5): 15 × 15 = 225 cells as in
+  Guo et al. 2016's evaluation and Paper 1's TriSI length 675 = 3 × 225. Spherical support
+  ``‖v‖ ≤ r`` (keypoint included), ``n_alpha`` cells over ``α ∈ [0, r)`` (size ``r/n_alpha``)
+  and ``n_beta`` cells over ``β ∈ [−r, r)`` (size ``2r/n_beta``). Bilinear interpolation between
   **cell centres** (Johnson & Hebert 1999); a weight falling outside the grid is given to the
-  nearest edge cell, so no mass is lost.
-* ``layout="pcl"`` (spin image only): PCL ``SpinImageEstimation`` grid, ``image_width = w``
-  (default 8): ``w + 1`` α nodes at ``j·r/w`` and ``2w + 1`` β nodes at ``−r + i·r/w``, bilinear
-  onto the nodes → ``(w+1)(2w+1) = 153`` values for ``w = 8``.
+  nearest edge cell, so no mass is lost. Flattened β-major (row = β cell ascending, column = α
+  cell ascending). Support-angle test ``n_q·n_p ≥ cos θ_max`` (signed, Johnson & Hebert).
+* ``layout="pcl"`` (spin image only): PCL 1.13 ``SpinImageEstimation`` (rectangular, not
+  radial/angular), ``image_width = w`` (default 8), rule for rule
+  (``pcl/features/impl/spin_image.hpp``, ``computeSiForPoint``): node spacing
+  ``s = r/(w√2)``; ``w + 1`` α nodes at ``j·s`` and ``2w + 1`` β nodes at ``(i − w)·s``;
+  support = the points of the radius-``r`` search that lie in the **cylinder**
+  ``α < w·s`` and ``|β| < w·s`` (``= r/√2``; others are dropped, not clamped); points at the
+  keypoint's position (the keypoint itself, ``‖v‖ = 0``) are skipped; the support-angle test is
+  ``|n_q·n_p| ≥ cos θ_max`` (opposite normals kept) and only applies for ``θ_max < 90°``;
+  bilinear weights onto the 4 surrounding nodes; flattened **α-major** (``j·(2w+1) + i``) →
+  ``(w+1)(2w+1) = 153`` values for ``w = 8``, normalised to unit sum. Verified against PCL's
+  output (``tests/data/pcl``, ``benchmarks/pcl_reference``).
 
-``interpolation="nearest"`` puts each point in the single nearest cell / node instead. Each image
-is flattened β-major (row = β bin ascending, column = α bin ascending) and normalised to unit
-sum.
+``interpolation="nearest"`` puts each point in the single nearest cell / node instead.
 
-TriSI: three spin images, one around each axis ``x, y, z`` of the point-based RoPS LRF
+TriSI: three spin images, one around each axis ``x, y, z`` of the RoPS LRF
 (:func:`relnav.geometry.lrf.rops_lrf`), concatenated ``[x, y, z]`` → 675, no PCA compression.
-Spin image: one image around the keypoint normal (``spin``), optionally with the support-angle
-filter ``n_q·n_p ≥ cos θ_max``.
+TriSI always uses the ``"guo"`` convention: it is Guo et al.'s descriptor and Paper 1 reports its
+length as 675 = 3 × 15 × 15, which the PCL grid (153 per image) cannot give; PCL has no TriSI.
+Spin image: one image around the keypoint normal (``spin``), optionally with a support angle.
 
 References
 ----------
@@ -51,7 +60,12 @@ log = logging.getLogger(__name__)
 
 
 class SpinGrid(NamedTuple):
-    """Spin-image grid: node ``j`` of α is at ``a0 + j·da`` (``j < na``), likewise for β."""
+    """Spin-image grid: node ``j`` of α is at ``a0 + j·da`` (``j < na``), likewise for β.
+
+    ``a_max`` / ``b_max``: support points with ``α ≥ a_max`` or ``|β| ≥ b_max`` are dropped
+    (``inf`` for the ``"guo"`` layout, which clamps instead); ``pcl``: PCL's rules (keypoint
+    skipped, ``|cos|`` support angle, α-major output).
+    """
 
     a0: float
     da: float
@@ -59,6 +73,9 @@ class SpinGrid(NamedTuple):
     b0: float
     db: float
     nb: int
+    a_max: float = np.inf
+    b_max: float = np.inf
+    pcl: bool = False
 
     @property
     def size(self) -> int:
@@ -81,7 +98,9 @@ def spin_grid(
         if int(width) < 1:
             raise ConfigError(f"spin image width must be ≥ 1, got {width}")
         w = int(width)
-        return SpinGrid(0.0, r / w, w + 1, -r, r / w, 2 * w + 1)
+        step = r / (w * np.sqrt(2.0))
+        lim = step * w
+        return SpinGrid(0.0, step, w + 1, -lim, step, 2 * w + 1, lim, lim, True)
     raise ConfigError(f"unknown spin image layout {layout!r}; use 'guo' or 'pcl'")
 
 
@@ -99,6 +118,9 @@ def _spin_kernel(
     b0: float,
     db: float,
     nb: int,
+    a_max: float,
+    b_max: float,
+    pcl: bool,
     bilinear: bool,
     normals: np.ndarray,
     cos_min: float,
@@ -130,14 +152,21 @@ def _spin_kernel(
                         + normals[qi, 1] * normals[pi, 1]
                         + normals[qi, 2] * normals[pi, 2]
                     )
+                    if pcl:
+                        c = abs(c)
                     if not (c >= cos_min):
                         continue
                 v0 = P[qi, 0] - p[0]
                 v1 = P[qi, 1] - p[1]
                 v2 = P[qi, 2] - p[2]
+                d2 = v0 * v0 + v1 * v1 + v2 * v2
+                if pcl and d2 == 0.0:
+                    continue  # PCL skips the keypoint itself (and exact duplicates)
                 beta = e0 * v0 + e1 * v1 + e2 * v2
-                a2 = v0 * v0 + v1 * v1 + v2 * v2 - beta * beta
+                a2 = d2 - beta * beta
                 alpha = np.sqrt(a2) if a2 > 0.0 else 0.0
+                if alpha >= a_max or abs(beta) >= b_max:
+                    continue  # outside PCL's cylinder
                 u = (alpha - a0) / da
                 w = (beta - b0) / db
                 if bilinear:
@@ -171,7 +200,10 @@ def _spin_kernel(
             base = ax * S
             for i in range(nb):
                 for j in range(na):
-                    out[k, base + i * na + j] = img[i, j] / total
+                    if pcl:
+                        out[k, base + j * nb + i] = img[i, j] / total
+                    else:
+                        out[k, base + i * na + j] = img[i, j] / total
     return out
 
 
@@ -302,7 +334,8 @@ def spin(
         orientation sets the sign of ``β``.
     layout : {"guo", "pcl"}
         ``"guo"``: ``n_alpha × n_beta`` cells (default 15 × 15 = 225, the registered length);
-        ``"pcl"``: PCL grid of ``width`` (``(w+1)(2w+1)``, 153 for ``w = 8``). Lengths other than
+        ``"pcl"``: PCL ``SpinImageEstimation`` of ``width`` (``(w+1)(2w+1)``, 153 for ``w = 8``;
+        cylinder support, keypoint skipped, α-major; module docstring). Lengths other than
         225 only work when this function is called directly.
     n_alpha, n_beta : int
         Cells of the ``"guo"`` layout.
@@ -312,15 +345,16 @@ def spin(
         Vote spreading.
     support_angle_deg : float, optional
         If given, only support points whose normal is within this angle of the keypoint normal
-        vote (Johnson & Hebert's support angle); disabled by default (PCL default).
+        vote (Johnson & Hebert's support angle; ``layout="pcl"``: within this angle of the
+        keypoint normal *or its opposite*, as PCL); disabled by default (PCL default).
     tree : scipy.spatial.cKDTree, optional
         Prebuilt tree of ``points``.
 
     Returns
     -------
     (K, D) float32
-        Unit-sum images; NaN rows for fewer than 5 support points (keypoint included) or a
-        non-finite keypoint normal.
+        Unit-sum images; NaN rows for fewer than 5 support points (keypoint included), a
+        non-finite keypoint normal or (``"pcl"``) no point left in the cylinder.
     """
     P, kp = _check_points(points, keypoint_idx)
     radius = _check_radius(radius, "spin image")
