@@ -1,7 +1,7 @@
 // PCL 1.13 reference descriptors for relnav's tests (see regenerate.py for the file formats).
 //
 // Usage: pcl_reference IN.bin OUT.bin
-// IN:  int32 N, K, spin_width; float32 radius, gp3_radius; N x 6 float32 (x y z nx ny nz);
+// IN:  int32 N, K, spin_width; float32 radius, gp3_radius, gp3_mu; N x 6 float32 (x y z nx ny nz);
 //      K int32 keypoint indices.
 // OUT: for spin, rops, fpfh, shot, triangles in turn: int32 rows, cols, then rows x cols values
 //      (float32; int32 for the triangles).
@@ -35,11 +35,11 @@ int main(int argc, char** argv) {
   }
   std::ifstream in(argv[1], std::ios::binary);
   int32_t head[3];
-  float rad[2];
+  float rad[3];
   in.read(reinterpret_cast<char*>(head), sizeof head);
   in.read(reinterpret_cast<char*>(rad), sizeof rad);
   const int N = head[0], K = head[1], width = head[2];
-  const float radius = rad[0], gp3_radius = rad[1];
+  const float radius = rad[0], gp3_radius = rad[1], gp3_mu = rad[2];
   std::vector<float> buf(6 * static_cast<size_t>(N));
   in.read(reinterpret_cast<char*>(buf.data()), sizeof(float) * buf.size());
   std::vector<int32_t> kp(K);
@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
     tree2->setInputCloud(pn);
     pcl::GreedyProjectionTriangulation<pcl::PointNormal> gp3;
     gp3.setSearchRadius(gp3_radius);
-    gp3.setMu(2.5);
+    gp3.setMu(gp3_mu);
     gp3.setMaximumNearestNeighbors(100);
     gp3.setMaximumSurfaceAngle(M_PI / 4);
     gp3.setMinimumAngle(M_PI / 18);

@@ -44,6 +44,7 @@ N_KEYPOINTS = 150
 RADIUS_FACTOR = 10.0
 GP3_RADIUS_FACTOR = 6.0
 SPIN_WIDTH = 8
+GP3_MU = 2.5
 
 
 def make_cloud(name: str, seed: int = SEED) -> dict[str, np.ndarray]:
@@ -63,6 +64,7 @@ def make_cloud(name: str, seed: int = SEED) -> dict[str, np.ndarray]:
         "keypoints": kp,
         "radius": np.float32(RADIUS_FACTOR * res),
         "gp3_radius": np.float32(GP3_RADIUS_FACTOR * res),
+        "gp3_mu": np.float32(GP3_MU),
     }
 
 
@@ -74,7 +76,7 @@ def run_pcl(exe: Path, cloud: dict[str, np.ndarray], work: Path) -> dict[str, np
     k = cloud["keypoints"].shape[0]
     with open(inp, "wb") as fh:
         np.array([n, k, SPIN_WIDTH], dtype=np.int32).tofile(fh)
-        np.array([cloud["radius"], cloud["gp3_radius"]], dtype=np.float32).tofile(fh)
+        np.array([cloud["radius"], cloud["gp3_radius"], cloud["gp3_mu"]], dtype=np.float32).tofile(fh)
         np.hstack([cloud["points"], cloud["normals"]]).astype(np.float32).tofile(fh)
         cloud["keypoints"].astype(np.int32).tofile(fh)
     subprocess.run([str(exe), str(inp), str(out)], check=True)
