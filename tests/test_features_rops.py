@@ -98,7 +98,7 @@ def test_rotations_angle_set() -> None:
 def test_lrf_matches_oracle_and_is_orthonormal(surface) -> None:
     P, r = surface
     kp = np.arange(0, len(P), 5)
-    L = rops_lrf(P, kp, r)
+    L = rops_lrf(P, kp, r, lrf="points")
     assert L.shape == (kp.size, 3, 3)
     n_checked = 0
     for k, i in enumerate(kp):
@@ -117,8 +117,8 @@ def test_lrf_is_equivariant(surface) -> None:
     T = random_transform(np.random.default_rng(3), max_translation=2.0)
     kp = np.arange(0, len(P), 3)
     good = np.array([oracle_lrf(P, i, r)[1] >= MARGIN for i in kp])
-    L0 = rops_lrf(P, kp, r)
-    L1 = rops_lrf(transform_points(T, P), kp, r)
+    L0 = rops_lrf(P, kp, r, lrf="points")
+    L1 = rops_lrf(transform_points(T, P), kp, r, lrf="points")
     # axes rotate with the cloud: rows of L1 = R · rows of L0
     np.testing.assert_allclose(L1[good], L0[good] @ T[:3, :3].T, atol=LRF_ATOL)
 
@@ -266,3 +266,40 @@ def test_support_neighbourhoods_grid_and_kdtree_agree() -> None:
     assert sorted(flat[off[0] : off[1]].tolist()) == [0, 1] and flat[off[1] : off[2]].tolist() == [
         2
     ]
+
+
+def test_local_mesh_lrf_equals_mesh_lrf_on_an_independent_delaunay(surface) -> None:
+    """Default frame = mesh LRF on scipy's Delaunay of the tangent-plane projection (oracle)."""
+    from scipy.spatial import Delaunay
+
+    P, r = surface
+    me = 3.0 * mean_resolution(P)
+    n_checked = 0
+    for i in (10, 123, 321, 400):
+        v = P - P[i]
+        d = np.linalg.norm(v, axis=1)
+        sup = d <= r
+        C = ((r - d[sup]) ** 2 * v[sup].T) @ v[sup]
+        _, V = np.linalg.eigh(C)
+        nb = np.flatnonzero(d <= r + me)
+        uv = v[nb] @ V[:, [2, 1]]
+        tri = nb[Delaunay(uv).simplices]
+        e = np.linalg.norm(P[tri] - P[np.roll(tri, 1, axis=1)], axis=2).max(axis=1)
+        tri = tri[(e <= me) & sup[tri].any(axis=1)]
+        ref = rops_lrf(P, np.array([i]), r, triangles=tri)[0]
+        got = rops_lrf(P, np.array([i]), r, max_edge=me)[0]
+        if np.isfinite(ref).all():
+            n_checked += 1
+            np.testing.assert_allclose(got, ref, atol=1e-9)
+    assert n_checked >= 3
+
+
+def test_lrf_option_validated(surface) -> None:
+    P, r = surface
+    with pytest.raises(ConfigError):
+        rops(P, np.array([0]), radius=r, lrf="mesh")
+    with pytest.raises(ConfigError):
+        rops_lrf(P, np.array([0]), r, max_edge=-1.0)
+    a = rops(P, np.array([7]), radius=r, lrf="points")
+    b = rops(P, np.array([7]), radius=r)
+    assert np.isfinite(a).all() and np.isfinite(b).all()

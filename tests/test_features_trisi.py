@@ -142,12 +142,15 @@ def test_spin_pcl_layout_nodes() -> None:
 def test_trisi_blocks_equal_spin_around_lrf_axes(surface) -> None:
     P, r = surface
     kp = np.array([3, 77, 200, 401])
-    T = trisi(P, kp, radius=r).reshape(len(kp), 3, 225)
-    L = rops_lrf(P, kp, r)
-    for a in range(3):
-        axes = np.full_like(P, np.nan)
-        axes[kp] = L[:, a]
-        np.testing.assert_allclose(T[:, a], spin(P, kp, radius=r, normals=axes), atol=1e-7)
+    for lrf in ("points", "local_mesh"):
+        T = trisi(P, kp, radius=r, lrf=lrf).reshape(len(kp), 3, 225)
+        L = rops_lrf(P, kp, r, lrf=lrf)
+        for a in range(3):
+            axes = np.full_like(P, np.nan)
+            axes[kp] = L[:, a]
+            np.testing.assert_allclose(T[:, a], spin(P, kp, radius=r, normals=axes), atol=1e-7)
+    # default: the point-based frame (ALGORITHMS §A.5)
+    np.testing.assert_array_equal(trisi(P, kp, radius=r), trisi(P, kp, radius=r, lrf="points"))
 
 
 def test_trisi_shape_and_unit_blocks(surface) -> None:
@@ -244,4 +247,6 @@ def test_bad_arguments(surface) -> None:
         trisi(P, np.array([0]), radius=0.0)
     with pytest.raises(ConfigError):
         trisi(P, np.array([0]), radius=r, interpolation="cubic")
+    with pytest.raises(ConfigError):
+        trisi(P, np.array([0]), radius=r, lrf="mesh")
     assert trisi(P, np.zeros(0, dtype=np.int64), radius=r).shape == (0, 675)

@@ -76,7 +76,9 @@ def run_pcl(exe: Path, cloud: dict[str, np.ndarray], work: Path) -> dict[str, np
     k = cloud["keypoints"].shape[0]
     with open(inp, "wb") as fh:
         np.array([n, k, SPIN_WIDTH], dtype=np.int32).tofile(fh)
-        np.array([cloud["radius"], cloud["gp3_radius"], cloud["gp3_mu"]], dtype=np.float32).tofile(fh)
+        np.array([cloud["radius"], cloud["gp3_radius"], cloud["gp3_mu"]], dtype=np.float32).tofile(
+            fh
+        )
         np.hstack([cloud["points"], cloud["normals"]]).astype(np.float32).tofile(fh)
         cloud["keypoints"].astype(np.int32).tofile(fh)
     subprocess.run([str(exe), str(inp), str(out)], check=True)
@@ -109,8 +111,11 @@ def main() -> None:
             res = run_pcl(args.exe, cloud, Path(tmp))
             for key, val in {**cloud, **res}.items():
                 arrays[f"{name}/{key}"] = np.asarray(val)
-            print(f"{name}: {cloud['points'].shape[0]} points, radius {float(cloud['radius']):.4g} m, "
-                  f"{res['triangles'].shape[0]} PCL triangles")
+            print(
+                f"{name}: {cloud['points'].shape[0]} points, "
+                f"radius {float(cloud['radius']):.4g} m, "
+                f"{res['triangles'].shape[0]} PCL triangles"
+            )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(args.out, **arrays)
     print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} kB)")

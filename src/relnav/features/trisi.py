@@ -28,7 +28,9 @@ Two binning conventions (``layout``):
 ``interpolation="nearest"`` puts each point in the single nearest cell / node instead.
 
 TriSI: three spin images, one around each axis ``x, y, z`` of the RoPS LRF
-(:func:`relnav.geometry.lrf.rops_lrf`), concatenated ``[x, y, z]`` → 675, no PCA compression.
+(:func:`relnav.geometry.lrf.rops_lrf`; point-based by default as ALGORITHMS §A.5,
+``lrf="local_mesh"`` for the local-mesh frame that RoPS uses by default), concatenated
+``[x, y, z]`` → 675, no PCA compression.
 TriSI always uses the ``"guo"`` convention: it is Guo et al.'s descriptor and Paper 1 reports its
 length as 675 = 3 × 15 × 15, which the PCL grid (153 per image) cannot give; PCL has no TriSI.
 Spin image: one image around the keypoint normal (``spin``), optionally with a support angle.
@@ -52,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
-from relnav.geometry.lrf import _check_points, _rops_lrf_csr, _support_csr
+from relnav.geometry.lrf import _check_points, _rops_lrf_csr, _support_csr, check_rops_lrf
 
 __all__ = ["SpinGrid", "spin", "spin_grid", "trisi"]
 
@@ -238,6 +240,7 @@ def trisi(
     n_beta: int = 15,
     interpolation: str = "bilinear",
     triangles: np.ndarray | None = None,
+    lrf: str = "points",
     tree: cKDTree | None = None,
     degenerate_tol: float = 1e-10,
 ) -> np.ndarray:
@@ -260,6 +263,8 @@ def trisi(
         Vote spreading (module docstring).
     triangles : (M, 3) int, optional
         Mesh triangles: use the mesh RoPS LRF.
+    lrf : {"points", "local_mesh"}
+        RoPS frame without ``triangles`` (:func:`relnav.geometry.lrf.rops_lrf`).
     tree : scipy.spatial.cKDTree, optional
         Prebuilt tree of ``points``.
     degenerate_tol : float
@@ -275,10 +280,13 @@ def trisi(
     radius = _check_radius(radius, "TriSI")
     grid = spin_grid(radius, layout="guo", n_alpha=n_alpha, n_beta=n_beta)
     bilinear = _interp_flag(interpolation)
+    check_rops_lrf(lrf, None)
     if kp.size == 0:
         return np.zeros((0, 3 * grid.size), dtype=np.float32)
     flat, offsets = _support_csr(P, kp, radius, tree)
-    lrfs = _rops_lrf_csr(P, kp, flat, offsets, radius, triangles, float(degenerate_tol))
+    lrfs = _rops_lrf_csr(
+        P, kp, flat, offsets, radius, triangles, float(degenerate_tol), lrf, None, tree
+    )
     valid = np.isfinite(lrfs).all(axis=(1, 2)) & (np.diff(offsets) >= MIN_SUPPORT)
     axes = np.ascontiguousarray(np.where(valid[:, None, None], lrfs, 0.0))
     out = _spin_kernel(

@@ -12,13 +12,21 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from relnav.errors import InputError
-from relnav.geometry.neighbors import build_tree
+from relnav.errors import ConfigError, InputError
+from relnav.geometry.local_mesh import delaunay_2d
+from relnav.geometry.neighbors import build_tree, mean_resolution
 
 __all__ = ["rops_lrf"]
 
 ROPS_MIN_SUPPORT = 5
 """Minimum support points (keypoint included) for a RoPS LRF (same rule as descriptors)."""
+
+ROPS_LRF_MODES = ("local_mesh", "points")
+"""Frames of :func:`rops_lrf` without a given mesh: local triangulation (default) or points."""
+
+ROPS_MAX_EDGE_FACTOR = 3.0
+"""Default longest local-mesh edge in mean resolutions ``Tr`` (**[interpretation]**; PCL's
+greedy projection uses ``mu = 2.5`` times each point's nearest-neighbour distance)."""
 
 
 def _support_csr(
@@ -148,6 +156,70 @@ def _rops_lrf_points_kernel(
 
 
 @njit(cache=True)
+def _mesh_scatter(
+    P: np.ndarray,
+    p: np.ndarray,
+    tris: np.ndarray,
+    sel: np.ndarray,
+    nt: int,
+    radius: float,
+    C: np.ndarray,
+    m: np.ndarray,
+    vv: np.ndarray,
+) -> float:
+    """Mesh RoPS scatter ``C`` (3, 3) and sign vector ``m`` (3,) of triangles ``tris[sel[:nt]]``.
+
+    Returns the sign-test scale ``Σ W Σ_a ‖v_a‖`` (0 when the triangles have no area).
+    """
+    C[:, :] = 0.0
+    m[:] = 0.0
+    total_area = 0.0
+    for j in range(nt):
+        a = P[tris[sel[j], 0]]
+        b = P[tris[sel[j], 1]]
+        c = P[tris[sel[j], 2]]
+        e1 = b - a
+        e2 = c - a
+        cx = e1[1] * e2[2] - e1[2] * e2[1]
+        cy = e1[2] * e2[0] - e1[0] * e2[2]
+        cz = e1[0] * e2[1] - e1[1] * e2[0]
+        total_area += 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+    if not (total_area > 0.0):
+        return 0.0
+    ssum = 0.0
+    for j in range(nt):
+        for a in range(3):
+            q = P[tris[sel[j], a]]
+            for i in range(3):
+                vv[a, i] = q[i] - p[i]
+        e1 = vv[1] - vv[0]
+        e2 = vv[2] - vv[0]
+        cx = e1[1] * e2[2] - e1[2] * e2[1]
+        cy = e1[2] * e2[0] - e1[0] * e2[2]
+        cz = e1[0] * e2[1] - e1[1] * e2[0]
+        area = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+        g0 = (vv[0, 0] + vv[1, 0] + vv[2, 0]) / 3.0
+        g1 = (vv[0, 1] + vv[1, 1] + vv[2, 1]) / 3.0
+        g2 = (vv[0, 2] + vv[1, 2] + vv[2, 2]) / 3.0
+        dc = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        W = (area / total_area) * (radius - dc) * (radius - dc)
+        # C_j = (1/12) [ (Σ_a v_a)(Σ_b v_b)ᵀ + Σ_a v_a v_aᵀ ]
+        for i in range(3):
+            si = vv[0, i] + vv[1, i] + vv[2, i]
+            for jj in range(3):
+                sj = vv[0, jj] + vv[1, jj] + vv[2, jj]
+                acc = si * sj
+                for a in range(3):
+                    acc += vv[a, i] * vv[a, jj]
+                C[i, jj] += W * acc / 12.0
+        for a in range(3):
+            for i in range(3):
+                m[i] += W * vv[a, i]
+            ssum += W * np.sqrt(vv[a, 0] ** 2 + vv[a, 1] ** 2 + vv[a, 2] ** 2)
+    return ssum
+
+
+@njit(cache=True)
 def _rops_lrf_mesh_kernel(
     P: np.ndarray,
     kp: np.ndarray,
@@ -184,51 +256,97 @@ def _rops_lrf_mesh_kernel(
                     stamp[tri] = k
                     buf[nt] = tri
                     nt += 1
-        total_area = 0.0
-        for j in range(nt):
-            a = P[tris[buf[j], 0]]
-            b = P[tris[buf[j], 1]]
-            c = P[tris[buf[j], 2]]
-            e1 = b - a
-            e2 = c - a
-            cx = e1[1] * e2[2] - e1[2] * e2[1]
-            cy = e1[2] * e2[0] - e1[0] * e2[2]
-            cz = e1[0] * e2[1] - e1[1] * e2[0]
-            total_area += 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
-        if not (total_area > 0.0):
+        ssum = _mesh_scatter(P, p, tris, buf, nt, radius, C, m, vv)
+        if not (ssum > 0.0):
             continue
+        if _frame_from_scatter(C, m, ssum, tol, frame):
+            out[k] = frame
+    return out
+
+
+@njit(cache=True)
+def _rops_lrf_local_mesh_kernel(
+    P: np.ndarray,
+    kp: np.ndarray,
+    flat: np.ndarray,
+    offsets: np.ndarray,
+    radius: float,
+    max_edge: float,
+    min_support: int,
+    tol: float,
+) -> np.ndarray:
+    """Mesh RoPS LRF on a local Delaunay triangulation (see :mod:`relnav.geometry.local_mesh`).
+
+    ``flat``/``offsets``: CSR neighbourhoods of radius ``radius + max_edge`` (keypoint included).
+    """
+    K = kp.shape[0]
+    out = np.full((K, 3, 3), np.nan)
+    C = np.zeros((3, 3))
+    m = np.zeros(3)
+    frame = np.zeros((3, 3))
+    vv = np.zeros((3, 3))
+    me2 = max_edge * max_edge
+    for k in range(K):
+        s0 = offsets[k]
+        n = offsets[k + 1] - s0
+        if n < min_support:
+            continue
+        p = P[kp[k]]
+        idx = flat[s0 : s0 + n]
+        rel = np.empty((n, 3))
+        inside = np.empty(n, dtype=np.bool_)
+        n_in = 0
         C[:, :] = 0.0
-        m[:] = 0.0
-        ssum = 0.0
-        for j in range(nt):
-            for a in range(3):
-                q = P[tris[buf[j], a]]
-                for i in range(3):
-                    vv[a, i] = q[i] - p[i]
-            e1 = vv[1] - vv[0]
-            e2 = vv[2] - vv[0]
-            cx = e1[1] * e2[2] - e1[2] * e2[1]
-            cy = e1[2] * e2[0] - e1[0] * e2[2]
-            cz = e1[0] * e2[1] - e1[1] * e2[0]
-            area = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
-            g0 = (vv[0, 0] + vv[1, 0] + vv[2, 0]) / 3.0
-            g1 = (vv[0, 1] + vv[1, 1] + vv[2, 1]) / 3.0
-            g2 = (vv[0, 2] + vv[1, 2] + vv[2, 2]) / 3.0
-            dc = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-            W = (area / total_area) * (radius - dc) * (radius - dc)
-            # C_j = (1/12) [ (Σ_a v_a)(Σ_b v_b)ᵀ + Σ_a v_a v_aᵀ ]
+        for t in range(n):
+            d2 = 0.0
             for i in range(3):
-                si = vv[0, i] + vv[1, i] + vv[2, i]
-                for jj in range(3):
-                    sj = vv[0, jj] + vv[1, jj] + vv[2, jj]
-                    acc = si * sj
-                    for a in range(3):
-                        acc += vv[a, i] * vv[a, jj]
-                    C[i, jj] += W * acc / 12.0
-            for a in range(3):
+                rel[t, i] = P[idx[t], i] - p[i]
+                d2 += rel[t, i] * rel[t, i]
+            d = np.sqrt(d2)
+            inside[t] = d <= radius
+            if inside[t]:
+                n_in += 1
+                w = (radius - d) * (radius - d)
                 for i in range(3):
-                    m[i] += W * vv[a, i]
-                ssum += W * np.sqrt(vv[a, 0] ** 2 + vv[a, 1] ** 2 + vv[a, 2] ** 2)
+                    for j in range(3):
+                        C[i, j] += w * rel[t, i] * rel[t, j]
+        if n_in < min_support:
+            continue
+        _, V = np.linalg.eigh(C)  # tangent plane: the two largest axes of the support scatter
+        uv = np.empty((n, 2))
+        for t in range(n):
+            uv[t, 0] = rel[t, 0] * V[0, 2] + rel[t, 1] * V[1, 2] + rel[t, 2] * V[2, 2]
+            uv[t, 1] = rel[t, 0] * V[0, 1] + rel[t, 1] * V[1, 1] + rel[t, 2] * V[2, 1]
+        loc = delaunay_2d(uv)
+        tris = np.empty((loc.shape[0], 3), dtype=np.int64)
+        nt = 0
+        for j in range(loc.shape[0]):
+            a = loc[j, 0]
+            b = loc[j, 1]
+            c = loc[j, 2]
+            if not (inside[a] or inside[b] or inside[c]):
+                continue
+            ok = True
+            for e in range(3):
+                u = loc[j, e]
+                v = loc[j, (e + 1) % 3]
+                l2 = 0.0
+                for i in range(3):
+                    l2 += (rel[u, i] - rel[v, i]) ** 2
+                if l2 > me2:
+                    ok = False
+                    break
+            if ok:
+                tris[nt, 0] = idx[a]
+                tris[nt, 1] = idx[b]
+                tris[nt, 2] = idx[c]
+                nt += 1
+        if nt == 0:
+            continue
+        sel = np.arange(nt)
+        ssum = _mesh_scatter(P, p, tris, sel, nt, radius, C, m, vv)
+        if not (ssum > 0.0):
+            continue
         if _frame_from_scatter(C, m, ssum, tol, frame):
             out[k] = frame
     return out
@@ -253,11 +371,18 @@ def rops_lrf(
     *,
     tree: cKDTree | None = None,
     triangles: np.ndarray | None = None,
+    lrf: str = "local_mesh",
+    max_edge: float | None = None,
     degenerate_tol: float = 1e-10,
 ) -> np.ndarray:
-    """RoPS local reference frames (Guo et al. 2013), point-based or mesh-based.
+    """RoPS local reference frames (Guo et al. 2013): mesh-based, on a local mesh, or point-based.
 
-    Point-based version (default, **[interpretation]** of ALGORITHMS §A.4 for point clouds):
+    Local-mesh version (default, ``lrf="local_mesh"``, **[interpretation]** of ALGORITHMS §A.4
+    for point clouds): the mesh version below on a Delaunay triangulation of the keypoint's
+    neighbourhood projected onto its tangent plane, edges ``≤ max_edge``
+    (:mod:`relnav.geometry.local_mesh`).
+
+    Point-based version (``lrf="points"``):
     with ``v_i = q_i − p`` over the support ``{q_i : ‖q_i − p‖ ≤ r}`` and ``d_i = ‖v_i‖``,
     ``C = Σ_i (r − d_i)² v_i v_iᵀ``; ``x`` / ``z`` are the eigenvectors of the largest /
     smallest eigenvalue, each flipped so that the weighted sum ``Σ_i (r − d_i)² v_i · axis`` is
@@ -279,7 +404,11 @@ def rops_lrf(
     tree : scipy.spatial.cKDTree, optional
         Prebuilt tree of ``points`` (built when omitted).
     triangles : (M, 3) int, optional
-        Triangle vertex indices into ``points``; switches to the mesh version.
+        Triangle vertex indices into ``points``; switches to the mesh version (``lrf`` ignored).
+    lrf : {"local_mesh", "points"}
+        Frame without ``triangles``.
+    max_edge : float, optional
+        Longest local-mesh edge, metres (default ``3·Tr``, ``Tr`` the mean resolution).
     degenerate_tol : float
         The frame is undefined (NaN) when two eigenvalues differ by ``≤ tol·λ_max`` (e.g.
         collinear or isotropic support) or a sign sum is ``≤ tol·Σ w‖v‖`` in magnitude (e.g. an
@@ -302,8 +431,19 @@ def rops_lrf(
         raise InputError(f"LRF radius must be positive and finite, got {radius}")
     if kp.size == 0:
         return np.full((0, 3, 3), np.nan)
+    check_rops_lrf(lrf, max_edge)
     flat, offsets = _support_csr(P, kp, float(radius), tree)
-    return _rops_lrf_csr(P, kp, flat, offsets, float(radius), triangles, float(degenerate_tol))
+    return _rops_lrf_csr(
+        P, kp, flat, offsets, float(radius), triangles, float(degenerate_tol), lrf, max_edge, tree
+    )
+
+
+def check_rops_lrf(lrf: str, max_edge: float | None) -> None:
+    """Raise :class:`ConfigError` for an unknown RoPS frame or a bad ``max_edge``."""
+    if lrf not in ROPS_LRF_MODES:
+        raise ConfigError(f"RoPS lrf must be one of {ROPS_LRF_MODES}, got {lrf!r}")
+    if max_edge is not None and not (np.isfinite(max_edge) and max_edge > 0):
+        raise ConfigError(f"RoPS max_edge must be positive and finite, got {max_edge}")
 
 
 def _rops_lrf_csr(
@@ -314,10 +454,23 @@ def _rops_lrf_csr(
     radius: float,
     triangles: np.ndarray | None,
     tol: float,
+    lrf: str = "points",
+    max_edge: float | None = None,
+    tree: cKDTree | None = None,
 ) -> np.ndarray:
     """:func:`rops_lrf` on precomputed support neighbourhoods (CSR from :func:`_support_csr`)."""
-    if triangles is None:
+    if triangles is None and lrf == "points":
         return _rops_lrf_points_kernel(P, kp, flat, offsets, radius, ROPS_MIN_SUPPORT, tol)
+    if triangles is None:
+        check_rops_lrf(lrf, max_edge)
+        if max_edge is None:
+            max_edge = ROPS_MAX_EDGE_FACTOR * mean_resolution(P, tree)
+        if not np.isfinite(max_edge):  # fewer than two distinct points: no frame
+            return np.full((kp.shape[0], 3, 3), np.nan)
+        ext_flat, ext_off = _support_csr(P, kp, radius + float(max_edge), tree)
+        return _rops_lrf_local_mesh_kernel(
+            P, kp, ext_flat, ext_off, radius, float(max_edge), ROPS_MIN_SUPPORT, tol
+        )
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     if tris.ndim != 2 or tris.shape[1] != 3:
         raise InputError(f"triangles must have shape (M, 3), got {tris.shape}")
