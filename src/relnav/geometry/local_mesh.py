@@ -43,7 +43,7 @@ def _circum(
 
 @njit(cache=True)
 def delaunay_2d(uv: np.ndarray) -> np.ndarray:
-    """Delaunay triangles of 2D points (incremental Bowyer–Watson, ``O(n²)``; for small sets).
+    """Delaunay triangles of 2D points (incremental Bowyer–Watson with a walk; small sets).
 
     Parameters
     ----------
@@ -63,104 +63,136 @@ def delaunay_2d(uv: np.ndarray) -> np.ndarray:
     span = max(uv[:, 0].max() - lo0, uv[:, 1].max() - lo1)
     if not (span > 0.0):
         return np.zeros((0, 3), dtype=np.int64)
-    # normalised coordinates + a super triangle far outside
     pts = np.empty((n + 3, 2))
     for i in range(n):
         pts[i, 0] = (uv[i, 0] - lo0) / span
         pts[i, 1] = (uv[i, 1] - lo1) / span
-    pts[n, 0] = -100.0
-    pts[n, 1] = -100.0
-    pts[n + 1, 0] = 100.0
-    pts[n + 1, 1] = -100.0
+    # super triangle (counter-clockwise) far outside the unit square; being finite, it can miss
+    # a sliver triangle on the convex hull of large sets (1 of 1 980 for 1 000 random points)
+    pts[n, 0] = -1e4
+    pts[n, 1] = -1e4
+    pts[n + 1, 0] = 1e4
+    pts[n + 1, 1] = -1e4
     pts[n + 2, 0] = 0.5
-    pts[n + 2, 1] = 100.0
+    pts[n + 2, 1] = 1e4
     cap = 2 * (n + 3) + 16
-    tri = np.empty((cap * 2, 3), dtype=np.int64)
-    cc = np.empty((cap * 2, 3))
-    alive = np.zeros(cap * 2, dtype=np.bool_)
+    tri = np.empty((cap, 3), dtype=np.int64)
+    nbr = np.full((cap, 3), -1, dtype=np.int64)  # nbr[t, e]: across edge tri[t, e] → tri[t, e+1]
+    cc = np.empty((cap, 3))
+    alive = np.zeros(cap, dtype=np.bool_)
+    free = np.empty(cap, dtype=np.int64)  # recycled slots
+    n_free = 0
     tri[0, 0] = n
     tri[0, 1] = n + 1
     tri[0, 2] = n + 2
     _circum(pts[n, 0], pts[n, 1], pts[n + 1, 0], pts[n + 1, 1], pts[n + 2, 0], pts[n + 2, 1], cc, 0)
     alive[0] = True
     nt = 1
-    bad = np.empty(cap * 2, dtype=np.int64)
-    edges = np.empty((cap * 6, 2), dtype=np.int64)
+    last = 0
+    stack = np.empty(cap, dtype=np.int64)
+    bad = np.empty(cap, dtype=np.int64)
+    mark = np.full(cap, -1, dtype=np.int64)
+    bu = np.empty(cap, dtype=np.int64)  # cavity boundary edges (u, v) and the triangle outside
+    bv = np.empty(cap, dtype=np.int64)
+    bo = np.empty(cap, dtype=np.int64)
+    start_of = np.full(n + 3, -1, dtype=np.int64)
+    newt = np.empty(cap, dtype=np.int64)
     for i in range(n):
         x = pts[i, 0]
         y = pts[i, 1]
-        dup = False
-        for j in range(i):
-            if pts[j, 0] == x and pts[j, 1] == y:
-                dup = True
-                break
-        if dup:
-            continue
-        nb = 0
-        for t in range(nt):
-            if alive[t]:
-                dx = x - cc[t, 0]
-                dy = y - cc[t, 1]
-                if dx * dx + dy * dy < cc[t, 2]:
-                    bad[nb] = t
-                    nb += 1
-        if nb == 0:
-            continue  # numerically on a circumcircle of every neighbour: skip the point
-        ne = 0
-        for b in range(nb):
-            t = bad[b]
+        # walk to the triangle containing (x, y)
+        t = last
+        steps = 0
+        while True:
+            moved = False
             for e in range(3):
-                u = tri[t, e]
-                v = tri[t, (e + 1) % 3]
-                shared = False
-                for b2 in range(nb):
-                    if b2 == b:
-                        continue
-                    t2 = bad[b2]
-                    for e2 in range(3):
-                        if tri[t2, e2] == v and tri[t2, (e2 + 1) % 3] == u:
-                            shared = True
-                            break
-                    if shared:
-                        break
-                if not shared:
-                    edges[ne, 0] = u
-                    edges[ne, 1] = v
+                a = tri[t, e]
+                b = tri[t, (e + 1) % 3]
+                o = (pts[b, 0] - pts[a, 0]) * (y - pts[a, 1]) - (pts[b, 1] - pts[a, 1]) * (
+                    x - pts[a, 0]
+                )
+                if o < 0.0 and nbr[t, e] >= 0:
+                    t = nbr[t, e]
+                    moved = True
+                    break
+            steps += 1
+            if not moved or steps > 4 * cap:
+                break
+        dup = False
+        for e in range(3):
+            a = tri[t, e]
+            if pts[a, 0] == x and pts[a, 1] == y:
+                dup = True
+        dx = x - cc[t, 0]
+        dy = y - cc[t, 1]
+        if dup or not (dx * dx + dy * dy < cc[t, 2]):
+            continue  # duplicate or numerically on the circumcircle: skip the point
+        # cavity: flood fill of the triangles whose circumcircle contains the point
+        nb = 0
+        ns = 1
+        stack[0] = t
+        mark[t] = i
+        while ns > 0:
+            ns -= 1
+            s = stack[ns]
+            bad[nb] = s
+            nb += 1
+            for e in range(3):
+                o = nbr[s, e]
+                if o >= 0 and mark[o] != i:
+                    dx = x - cc[o, 0]
+                    dy = y - cc[o, 1]
+                    if dx * dx + dy * dy < cc[o, 2]:
+                        mark[o] = i
+                        stack[ns] = o
+                        ns += 1
+        # boundary edges of the cavity (an edge whose neighbour is not bad)
+        ne = 0
+        for k in range(nb):
+            s = bad[k]
+            for e in range(3):
+                o = nbr[s, e]
+                if o < 0 or mark[o] != i:
+                    bu[ne] = tri[s, e]
+                    bv[ne] = tri[s, (e + 1) % 3]
+                    bo[ne] = o
                     ne += 1
-        for b in range(nb):
-            alive[bad[b]] = False
-        # compact when the buffer would overflow
-        if nt + ne > tri.shape[0]:
-            m = 0
-            for t in range(nt):
-                if alive[t]:
-                    tri[m] = tri[t]
-                    cc[m] = cc[t]
-                    alive[m] = True
-                    m += 1
-            for t in range(m, nt):
-                alive[t] = False
-            nt = m
-            if nt + ne > tri.shape[0]:
-                grow = max(tri.shape[0], ne) * 2
-                tri2 = np.empty((grow, 3), dtype=np.int64)
-                cc2 = np.empty((grow, 3))
-                al2 = np.zeros(grow, dtype=np.bool_)
-                tri2[:nt] = tri[:nt]
-                cc2[:nt] = cc[:nt]
-                al2[:nt] = alive[:nt]
-                tri, cc, alive = tri2, cc2, al2
-                bad = np.empty(grow, dtype=np.int64)
-                edges = np.empty((grow * 3, 2), dtype=np.int64)
-        for e in range(ne):
-            u = edges[e, 0]
-            v = edges[e, 1]
-            tri[nt, 0] = u
-            tri[nt, 1] = v
-            tri[nt, 2] = i
-            _circum(pts[u, 0], pts[u, 1], pts[v, 0], pts[v, 1], x, y, cc, nt)
-            alive[nt] = True
-            nt += 1
+        for k in range(nb):
+            alive[bad[k]] = False
+            free[n_free] = bad[k]
+            n_free += 1
+        for k in range(ne):
+            if n_free > 0:
+                n_free -= 1
+                s = free[n_free]
+            else:
+                s = nt
+                nt += 1
+            newt[k] = s
+            u = bu[k]
+            v = bv[k]
+            tri[s, 0] = u
+            tri[s, 1] = v
+            tri[s, 2] = i
+            _circum(pts[u, 0], pts[u, 1], pts[v, 0], pts[v, 1], x, y, cc, s)
+            alive[s] = True
+            mark[s] = -1
+            o = bo[k]
+            nbr[s, 0] = o
+            if o >= 0:
+                for e in range(3):
+                    if tri[o, e] == v and tri[o, (e + 1) % 3] == u:
+                        nbr[o, e] = s
+                        break
+            start_of[u] = s
+        # new triangles (u, v, i): edge (v, i) borders the new triangle starting at v,
+        # edge (i, u) the one ending at u (whose start_of is u's predecessor)
+        for k in range(ne):
+            s = newt[k]
+            w = start_of[bv[k]]
+            nbr[s, 1] = w
+            nbr[w, 2] = s
+        last = newt[0]
     m = 0
     for t in range(nt):
         if alive[t] and tri[t, 0] < n and tri[t, 1] < n and tri[t, 2] < n:
