@@ -48,7 +48,7 @@ def delaunay_2d(uv: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     uv : (n, 2) float64
-        Points; exact duplicates are skipped (only the first is a vertex).
+        Points; exact duplicates are skipped (only one of them is a vertex).
 
     Returns
     -------
@@ -97,11 +97,15 @@ def delaunay_2d(uv: np.ndarray) -> np.ndarray:
     bo = np.empty(cap, dtype=np.int64)
     start_of = np.full(n + 3, -1, dtype=np.int64)
     newt = np.empty(cap, dtype=np.int64)
-    for i in range(n):
+    # insertion in a scrambled (deterministic) order: spatially sorted input, as radius searches
+    # return it, would put most new points outside the current hull (large cavities, long walks)
+    step = 7919 if n % 7919 != 0 else 7907
+    for jj in range(n):
+        i = (jj * step) % n
         x = pts[i, 0]
         y = pts[i, 1]
-        # walk to the triangle containing (x, y)
         t = last
+        # walk to the triangle containing (x, y)
         steps = 0
         while True:
             moved = False
