@@ -4,6 +4,10 @@ Usage (needs Debian's ``libpcl-dev`` and cmake; the tests do NOT need PCL)::
 
     benchmarks/pcl_reference/build.sh            # builds build/pcl_reference
     python benchmarks/pcl_reference/regenerate.py [--out tests/data/pcl/pcl_reference.npz]
+    python benchmarks/pcl_reference/compare.py    # relnav vs the fixture, per descriptor
+
+(``--gp3-mu 4 --gp3-radius-factor 10 --out /tmp/mu4.npz`` writes PCL's outputs on a denser greedy
+mesh; ``compare.py --other /tmp/mu4.npz`` then correlates PCL's RoPS on the two meshes.)
 
 For each cloud (procedural ``voyager`` and ``asteroid`` targets, seed 0) ``N_POINTS`` area-weighted
 uniform surface samples are drawn (``np.random.default_rng(SEED)``) with their exact face normals,
@@ -47,7 +51,9 @@ SPIN_WIDTH = 8
 GP3_MU = 2.5
 
 
-def make_cloud(name: str, seed: int = SEED) -> dict[str, np.ndarray]:
+def make_cloud(
+    name: str, seed: int = SEED, gp3_mu: float = GP3_MU, gp3_rf: float = GP3_RADIUS_FACTOR
+) -> dict[str, np.ndarray]:
     """Surface samples, normals, keypoints and radius of one fixture cloud (float32 points)."""
     target = procedural_target(name, seed=0)
     rng = np.random.default_rng(seed)
@@ -63,8 +69,8 @@ def make_cloud(name: str, seed: int = SEED) -> dict[str, np.ndarray]:
         "normals": normals,
         "keypoints": kp,
         "radius": np.float32(RADIUS_FACTOR * res),
-        "gp3_radius": np.float32(GP3_RADIUS_FACTOR * res),
-        "gp3_mu": np.float32(GP3_MU),
+        "gp3_radius": np.float32(gp3_rf * res),
+        "gp3_mu": np.float32(gp3_mu),
     }
 
 
@@ -103,11 +109,15 @@ def main() -> None:
     ap.add_argument(
         "--out", type=Path, default=HERE.parents[1] / "tests" / "data" / "pcl" / "pcl_reference.npz"
     )
+    ap.add_argument("--gp3-mu", type=float, default=GP3_MU, help="greedy projection mu")
+    ap.add_argument(
+        "--gp3-radius-factor", type=float, default=GP3_RADIUS_FACTOR, help="search radius / Tr"
+    )
     args = ap.parse_args()
     arrays: dict[str, np.ndarray] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in CLOUDS:
-            cloud = make_cloud(name)
+            cloud = make_cloud(name, gp3_mu=args.gp3_mu, gp3_rf=args.gp3_radius_factor)
             res = run_pcl(args.exe, cloud, Path(tmp))
             for key, val in {**cloud, **res}.items():
                 arrays[f"{name}/{key}"] = np.asarray(val)
