@@ -115,6 +115,15 @@ class NavigatorConfig:
         first scan's RMS radius, rotation in degrees.
     noise_floor : float
         Smallest 1σ of a map patch along its normal, multiples of ``s₀``.
+    alert_limit_t, alert_limit_r_deg : float
+        Integrity monitoring (0 = off, the default): a step whose protection level exceeds
+        the alert limit (m, degrees) is flagged ``degenerate`` with the reason, its pose kept
+        (the scans do not determine that step to the required accuracy). The protection
+        level is ``protection_k`` × the largest 1σ of the step's translation (rotation) from
+        the filter's step covariance (recorded for every step as ``step_sigma_t``,
+        ``step_sigma_r_deg``).
+    protection_k : float
+        Multiplier of the step's 1σ in the protection level.
     inplane_sigma : float
         1σ of a map patch along its own plane, multiples of ``s₀`` (weak: point-to-plane).
     k_neighbors : int
@@ -146,6 +155,9 @@ class NavigatorConfig:
     sigma_first_t: float = 5.0
     sigma_first_r_deg: float = 30.0
     noise_floor: float = 0.03
+    alert_limit_t: float = 0.0
+    alert_limit_r_deg: float = 0.0
+    protection_k: float = 3.0
 
 
 def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
@@ -291,6 +303,7 @@ class Navigator:
             result = RegistrationResult(
                 T_target_source=T_pred, status="failed", message=f"{type(e).__name__}: {e}"
             )
+        used_prior = result.status != "ok"
         if result.status == "ok":
             if result.info.get("recovered"):
                 st, sr = self._first_sigma
@@ -306,6 +319,8 @@ class Navigator:
         else:
             self.motion.skip()
             self.pose = self.motion.pose.copy()
+        if self.motion.step_covariance is not None:
+            self._judge_integrity(result, self.motion.step_covariance)
         step = invert(prev_pose) @ self.pose
         self.n_frames += 1
         self._online.append(self.pose.copy())
@@ -313,11 +328,30 @@ class Navigator:
             self.pose.copy(),
             step,
             result,
-            result.status != "ok",
+            used_prior,
             result.status,
             n_raw,
             time.perf_counter() - t_start,
         )
+
+    def _judge_integrity(self, result: RegistrationResult, C: np.ndarray) -> None:
+        """Record the step's 1σ (largest translation/rotation axis of its covariance ``C``,
+        body frame) and flag an ``ok`` step whose protection level exceeds an alert limit."""
+        c = self.config
+        s_t = math.sqrt(max(float(np.linalg.eigvalsh(C[:3, :3])[-1]), 0.0))
+        s_r = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(C[3:, 3:])[-1]), 0.0)))
+        result.info.update(step_sigma_t=s_t, step_sigma_r_deg=s_r)
+        if result.status != "ok":
+            return
+        pl_t, pl_r = c.protection_k * s_t, c.protection_k * s_r
+        over = []
+        if c.alert_limit_t > 0 and pl_t > c.alert_limit_t:
+            over.append(f"translation {pl_t:.3g} m > {c.alert_limit_t:g} m")
+        if c.alert_limit_r_deg > 0 and pl_r > c.alert_limit_r_deg:
+            over.append(f"rotation {pl_r:.3g}° > {c.alert_limit_r_deg:g}°")
+        if over:
+            result.status = "degenerate"
+            result.message = "protection level over the alert limit: " + ", ".join(over)
 
     def skip_frame(self, reason: str) -> OdometryStep:
         """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the
