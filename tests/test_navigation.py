@@ -285,3 +285,65 @@ def test_numba_se3_maps_equal_the_reference(rng):
         np.testing.assert_allclose(ref.exp_se3(lie.log_se3(T)), T, atol=1e-6)
         if ang < np.pi - 1e-3:  # away from π the twist itself is unique
             np.testing.assert_allclose(lie.log_se3(T), ref.log_se3(T), atol=1e-9)
+
+
+def test_step_covariance_is_consistent_with_the_step_errors():
+    """The filter's step covariance (stochastic clone of the previous pose) against Monte Carlo
+    step errors: the NEES of one step per independent run lies in its 95 % χ² band."""
+    from scipy.stats import chi2
+
+    v = np.array([0.5, 0.0, 0.1, 0.0, 0.01, 0.02])
+    sig = np.array([0.05] * 3 + [0.004] * 3)
+    H = np.diag(1 / sig**2)  # body-frame information of a pose measurement
+    runs, nees = 150, []
+    for seed in range(runs):
+        rng = np.random.default_rng(seed)
+        f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 2.0), np.full(6, 1e-6))
+        T = np.eye(4)
+        prev_est, prev_true = np.eye(4), np.eye(4)
+        for k in range(1, 16):
+            T = T @ exp_se3(v)
+            meas = T @ exp_se3(rng.normal(0, sig))
+            f.predict(float(k))
+            T_pred, P_pp = f._pred[0], f._pred[1][:6, :6]
+            y = log_se3(invert(T_pred) @ meas)
+            T_map = T_pred @ exp_se3(np.linalg.solve(np.linalg.inv(P_pp) + H, H @ y))
+            Ad_inv = np.linalg.inv(adjoint(T_map))
+            f.update(T_map, Ad_inv.T @ H @ Ad_inv)
+            if k < 15:
+                prev_est, prev_true = f.pose.copy(), T.copy()
+        S_est = invert(prev_est) @ f.pose
+        e = log_se3(invert(S_est) @ (invert(prev_true) @ T))
+        nees.append(float(e @ np.linalg.solve(f.step_covariance, e)))
+    lo, hi = chi2.ppf([0.025, 0.975], 6 * runs) / runs
+    assert lo < np.mean(nees) < hi, (np.mean(nees), lo, hi)
+
+
+def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
+    """Integrity monitoring only labels steps: the poses are those of the unmonitored run, every
+    step records its 1σ, and a limit below every protection level flags every registered step."""
+    free = run_sequence(orbit_seq, "relnav", max_frames=10)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=10, alert_limit_t=1e-6)
+    np.testing.assert_array_equal(free.poses, tight.poses)
+    assert all(s.result.info["step_sigma_t"] > 0 for s in free.steps[1:])
+    assert all(s.status in ("first", "ok") for s in free.steps)
+    assert all(s.status == "degenerate" for s in tight.steps[1:])
+    assert all("protection level" in s.result.message for s in tight.steps[1:])
+    assert not any(s.used_prior for s in tight.steps[1:])
+
+
+def test_normal_information_drops_the_in_plane_pull(rng):
+    """On a flat patch the normals fix only z, roll and pitch: the normal-only information has
+    no translation along the plane and no rotation about its normal, the solver's has."""
+    from relnav.navigation.navigator import _normal_information
+
+    P = np.c_[rng.uniform(-5, 5, (200, 2)), np.zeros(200)]
+    n = np.tile([0.0, 0.0, 1.0], (200, 1))
+    sn2, sp2 = 0.01**2, 0.3**2
+    nn = n[:, :, None] * n[:, None, :]
+    Om = nn / sn2 + (np.eye(3) - nn) / sp2
+    H = _normal_information(P, np.eye(4), np.arange(200), np.zeros(200), n, Om, sp2, 9.0)
+    free = [0, 1, 5]  # x, y translation and rotation about z
+    assert np.allclose(H[np.ix_(free, free)], 0.0, atol=1e-6)
+    fixed = [2, 3, 4]
+    assert np.all(np.linalg.eigvalsh(H[np.ix_(fixed, fixed)]) > 1e3)

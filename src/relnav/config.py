@@ -130,6 +130,9 @@ OPTION_RANGES: dict[str, _Range] = {
     "sigma_first_t": (0, False, None, False),
     "sigma_first_r_deg": (0, False, 180, True),
     "noise_floor": (0, False, None, False),
+    "alert_limit_t": (0, True, None, False),
+    "alert_limit_r_deg": (0, True, 180, True),
+    "protection_k": (0, False, None, False),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""

@@ -58,6 +58,8 @@ class ConstantVelocityFilter:
         self._hist: list[dict[str, np.ndarray]] = []
         self.smoothed: list[np.ndarray] = []
         self._F: np.ndarray | None = None
+        self._clone: tuple[np.ndarray, np.ndarray] | None = None
+        self.step_covariance: np.ndarray | None = None
 
     def adapt(self, chi2: float, dof: int = 6, rate: float = 0.1, max_scale: float = 100.0) -> None:
         """Scale the process noise by the recent normalised innovation (``χ²/dof``, EMA).
@@ -83,6 +85,9 @@ class ConstantVelocityFilter:
         Q[6:, 6:] = np.diag(sa2)
         Q[:6, :6] = np.diag(sa2 * dt**2) / 3.0
         P = F @ self.P @ F.T + Q
+        # stochastic clone of the previous pose error: its covariance and its cross-covariance
+        # with the predicted state, for the covariance of the step (see step_covariance)
+        self._clone = (self.P[:6, :6].copy(), F @ self.P[:, :6])
         T_pred = self.pose @ step
         self._v_pred = self.velocity.copy()
         self._pred = (T_pred, 0.5 * (P + P.T), float(t))
@@ -114,6 +119,12 @@ class ConstantVelocityFilter:
         except np.linalg.LinAlgError:
             G = np.zeros((6, 6))
         P_prior = P
+        if self._clone is not None:
+            Pc, C = self._clone
+            # the previous pose's estimate is not revised here (no smoothing): its error keeps
+            # the covariance Pc; only its correlation with the new state changes
+            C_post = C - P[:, :6] @ G @ C[:6, :]
+            self._set_step_covariance(T_star, P - P[:, :6] @ G @ P[:6, :], Pc, C_post)
         P = P - P[:, :6] @ G @ P[:6, :]
         self.P = 0.5 * (P + P.T)
         self.pose = np.array(T_star, dtype=np.float64)
@@ -125,9 +136,24 @@ class ConstantVelocityFilter:
         """No usable measurement: keep the prediction (pose and grown covariance)."""
         assert self._pred is not None, "predict() first"
         T_pred, P, t = self._pred
+        if self._clone is not None:
+            self._set_step_covariance(T_pred, P, *self._clone)
         self.pose, self.P, self.t = T_pred, P, t
         self._record(T_pred, P)
         self._pred = None
+
+    def _set_step_covariance(
+        self, T_new: np.ndarray, P_new: np.ndarray, P_clone: np.ndarray, C: np.ndarray
+    ) -> None:
+        """Covariance of the step ``S = T_prev⁻¹ T_new`` (body frame of ``T_new``, 6×6).
+
+        With right perturbations ``T = T̂ exp(δ)``, the step's error is
+        ``e = δ_new − Ad(S⁻¹) δ_prev``; ``C`` is ``Cov(state_new, δ_prev)`` (12×6).
+        """
+        A = adjoint(invert(invert(self.pose) @ T_new))
+        X = C[:6, :] @ A.T
+        S = P_new[:6, :6] + A @ P_clone @ A.T - X - X.T
+        self.step_covariance = 0.5 * (S + S.T)
 
     # ------------------------------------------------------------------ fixed-lag smoothing
     def start_smoothing(self, lag: int) -> None:

@@ -20,11 +20,15 @@ The map is bounded: above ``max_voxels`` the least recently seen voxels are drop
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
 from relnav.registration.icp import _jacobi_eigh, _kd_build
+
+log = logging.getLogger(__name__)
 
 __all__ = ["VoxelMap", "plane_information"]
 
@@ -163,6 +167,13 @@ def plane_information(
 
 
 _FAR = np.full((1, 3), 1e18)
+_HALF = 1 << 20  # cells per axis on each side of the origin that a packed code can hold
+
+
+def _pack(keys: np.ndarray) -> np.ndarray:
+    """One int64 per voxel cell (21 bits per axis), ordered as the cells lexicographically."""
+    k = keys.astype(np.int64) + _HALF
+    return (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]
 
 
 class VoxelMap:
@@ -207,7 +218,9 @@ class VoxelMap:
         self.inplane_sigma = float(inplane_sigma) if inplane_sigma else 2.0 * self.voxel_size
         self.k_neighbors = int(k_neighbors)
         self.rebuild_fraction = float(rebuild_fraction)
-        self._index: dict[tuple[int, int, int], int] = {}
+        # voxel index: packed cell codes, sorted, and the storage slot of each
+        self._codes = np.zeros(0, dtype=np.int64)
+        self._code_slots = np.zeros(0, dtype=np.int64)
         cap = 1024
         self._w = np.zeros(cap)
         self._s1 = np.zeros((cap, 3))
@@ -234,13 +247,22 @@ class VoxelMap:
         if not len(P):
             return
         keys = np.floor(P / self.voxel_size).astype(np.int64)
-        uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+        inside = np.all(np.abs(keys) < _HALF, axis=1)
+        if not inside.all():
+            log.warning("%d points beyond the map's cell range dropped", int((~inside).sum()))
+            P, keys = P[inside], keys[inside]
+            if not len(P):
+                return
+        codes = _pack(keys)
+        uniq, first, inv = np.unique(codes, return_index=True, return_inverse=True)
         inv = inv.ravel()
-        slots = np.empty(len(uniq), dtype=np.int64)
-        get = self._index.get
-        for u, key in enumerate(map(tuple, uniq.tolist())):
-            i = get(key)
-            slots[u] = self._append(key) if i is None else i
+        slots = self._lookup(uniq)
+        new = slots < 0
+        if new.any():
+            slots[new] = self._append(keys[first[new]])
+            pos = np.searchsorted(self._codes, uniq[new])
+            self._codes = np.insert(self._codes, pos, uniq[new])
+            self._code_slots = np.insert(self._code_slots, pos, slots[new])
         w_add = np.bincount(inv, minlength=len(uniq)).astype(float)
         s1_add = np.zeros((len(uniq), 3))
         np.add.at(s1_add, inv, P)
@@ -259,21 +281,35 @@ class VoxelMap:
             self._evict()
         self._dirty = True
 
-    def _append(self, key: tuple[int, int, int]) -> int:
-        if self.n == len(self._w):
-            cap = 2 * len(self._w)
+    def _lookup(self, codes: np.ndarray) -> np.ndarray:
+        """Storage slot of each sorted cell code (-1: not in the map)."""
+        pos = np.searchsorted(self._codes, codes)
+        pos_c = np.minimum(pos, max(len(self._codes) - 1, 0))
+        hit = (
+            (pos < len(self._codes)) & (self._codes[pos_c] == codes)
+            if len(self._codes)
+            else (np.zeros(len(codes), dtype=bool))
+        )
+        out = np.full(len(codes), -1, dtype=np.int64)
+        out[hit] = self._code_slots[pos_c[hit]]
+        return out
+
+    def _append(self, keys: np.ndarray) -> np.ndarray:
+        """New empty voxels for the cells ``keys`` (``(m, 3)`` int64); their slots."""
+        m = len(keys)
+        if self.n + m > len(self._w):
+            cap = max(2 * len(self._w), self.n + m)
             self._w = np.resize(self._w, cap)
             self._s1 = np.resize(self._s1, (cap, 3))
             self._seen = np.resize(self._seen, cap)
             self._keys = np.resize(self._keys, (cap, 3))
             self._info_all = np.resize(self._info_all, (cap, 3, 3))
             self._normal_all = np.resize(self._normal_all, (cap, 3))
-        i = self.n
+        i = np.arange(self.n, self.n + m, dtype=np.int64)
         self._w[i] = 0.0
         self._s1[i] = 0.0
-        self._keys[i] = key
-        self._index[key] = i
-        self.n += 1
+        self._keys[i] = keys
+        self.n += m
         return i
 
     def _evict(self) -> None:
@@ -281,7 +317,9 @@ class VoxelMap:
         for name in ("_w", "_s1", "_seen", "_keys", "_info_all", "_normal_all"):
             setattr(self, name, getattr(self, name)[keep].copy())
         self.n = len(keep)
-        self._index = {tuple(k): i for i, k in enumerate(self._keys[: self.n].tolist())}
+        codes = _pack(self._keys[: self.n])
+        order = np.argsort(codes, kind="stable")
+        self._codes, self._code_slots = codes[order], order.astype(np.int64)
         self._touched = set(range(self.n))
         self._n_main = 0  # force a rebuild
 
