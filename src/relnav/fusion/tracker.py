@@ -27,6 +27,7 @@ the body-axis rotation vector of ``R_gtᵀ R_est`` (degrees in reports).
 
 from __future__ import annotations
 
+import copy
 import csv
 import logging
 import math
@@ -84,12 +85,16 @@ class Observation:
         Observer's quality score (e.g. registration fitness, 1 = best).
     R : (6, 6) ndarray, optional
         Covariance of ``[δp (m), δθ (rad)]``; default: the filter's.
+    drift : (6, 6) ndarray, optional
+        Growth of the observer's own slowly varying error since its previous observation
+        (same coordinates), for ``TwistorUKF(observer_bias=True)``.
     """
 
     position: np.ndarray
     quat_xyzw: np.ndarray
     quality: float = 1.0
     R: np.ndarray | None = None
+    drift: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.position, dtype=np.float64)
@@ -505,10 +510,11 @@ class Tracker:
         ``"fixed"``: each update uses the observation's covariance (or the filter's ``r``) as
         is. ``"innovation"`` **[interpretation]**: covariance matching on the innovations seen
         so far — before each update the measurement covariance is multiplied by the scalar
-        ``λ ≥ 1`` that makes the mean NIS of the past updates (re-evaluated with
-        ``S_j = H P_j Hᵀ + λ R_j``) equal to the measurement dimension; ``λ = 1`` until two
-        updates exist. Only past innovations are used (causal, no ground truth); ``λ`` per
-        step is in :attr:`TrackResult.noise_scale`.
+        ``λ ≥ 1`` that makes the mean NIS of the updates so far, this one included
+        (re-evaluated with ``S_j = H P_j Hᵀ + λ R_j``), equal to the measurement dimension;
+        ``λ = 1`` without an innovation. Only the measurements up to the current one
+        are used (causal, no ground truth); ``λ`` per step is in
+        :attr:`TrackResult.noise_scale`.
     **filter_options
         Passed to the filter (``q``, ``r``, ``p0``, ``alpha``, ``kappa``, ``lvlh_axes``,
         ``translation_model``, ``jacobian``, ``gate_probability`` …).
@@ -581,7 +587,7 @@ class Tracker:
 
     def _match_scale(self) -> float:
         """``λ ≥ 1`` with mean ``νᵀ(A + λR)⁻¹ν`` over the past updates = their dimension."""
-        if len(self._innov) < 2:
+        if not self._innov:
             return 1.0
         m = float(np.mean([nu.size for nu, _, _ in self._innov]))
 
@@ -656,15 +662,19 @@ class Tracker:
             return f"flagged: {reason}", math.nan
         assert obs is not None
         R = obs.R
+        if obs.drift is not None and hasattr(f, "add_observer_drift"):
+            f.add_observer_drift(obs.drift)
         if self.noise_scale == "innovation":
+            R0 = f.R if R is None else np.asarray(R, dtype=np.float64)
+            probe = copy.deepcopy(f).update(obs.position, obs.quat_xyzw, R=R0)
+            if probe.meas_cov.size and np.all(np.isfinite(probe.innovation)):
+                A = probe.innovation_cov - probe.meas_cov
+                self._innov.append((probe.innovation, A, probe.meas_cov))
             self.lam = self._match_scale()
-            R = (f.R if R is None else np.asarray(R, dtype=np.float64)) * self.lam
+            R = R0 * self.lam
         info = f.update(obs.position, obs.quat_xyzw, R=R)
         if not info.accepted:
             return f"flagged: {info.message}", info.nis
-        if self.noise_scale == "innovation" and info.meas_cov.size:
-            Rj = info.meas_cov / self.lam
-            self._innov.append((info.innovation, info.innovation_cov - info.meas_cov, Rj))
         return "update", info.nis
 
     def run(
@@ -965,6 +975,7 @@ class ContourObserver:
         self.fallback_camera_only = bool(fallback_camera_only)
         self.name = "contour"
         self.n_fusion_failed = 0
+        self._last_R: np.ndarray | None = None
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -1012,7 +1023,10 @@ class ContourObserver:
             reason = self.model.history[-1].get("reason", "rejected") if self.model.history else ""
             raise InputError(f"frame {k}: contour model: {reason}")
         R = self.model.last_covariance  # None → the filter's fixed noise
-        return Observation(np.asarray(position), np.asarray(quat), float(quality), R=R)
+        # [interpretation] the frame merged last carries its pose error into the model, which
+        # the following registrations inherit: that is the observer's drift since then
+        drift, self._last_R = self._last_R, R
+        return Observation(np.asarray(position), np.asarray(quat), float(quality), R=R, drift=drift)
 
 
 def _default_observer(second: str | None, seed: int) -> Observer:
@@ -1111,6 +1125,9 @@ def track_sequence(
         ``progress(done, total)``.
     **tracker_options
         Passed to :class:`Tracker` (``n_mean_motion``, ``orbit_radius_m``, ``q``, ``r`` …).
+        With the UKF and the contour observer, ``centre_offset`` and ``observer_bias`` default
+        to ``True`` (:class:`relnav.fusion.ukf.TwistorUKF`): its reference point is the first
+        frame's centroid, which circles the spin axis, and its model drifts.
 
     Returns
     -------
@@ -1158,6 +1175,10 @@ def track_sequence(
     else:
         obs_impl = observer
 
+    if str(filter).lower() == "ukf" and isinstance(obs_impl, ContourObserver):
+        # the contour model's reference point circles the spin axis and the model drifts
+        tracker_options.setdefault("centre_offset", True)
+        tracker_options.setdefault("observer_bias", True)
     tracker = Tracker(filter, **tracker_options)
     steps = np.diff(times)
     steps = steps[steps > 0]

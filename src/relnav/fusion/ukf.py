@@ -626,6 +626,14 @@ class TwistorUKF(PoseFilter):
         ``|ω| > 3σ_ω``) picks the point of the axis nearest the reference point.
     axis_sigma : float
         See ``centre_offset`` (m, default 1e-3).
+    observer_bias : bool
+        **[interpretation, not in Paper 2]** Carry the observer's slowly varying error as a
+        6-D random-walk bias ``β = [β_p (m), β_θ (rad)]`` (last in the error state): the
+        measured point is ``d + R c + β_p`` and the measured attitude ``q ⊗ exp(β_θ)``. ``β``
+        starts at zero (the observer's frame is anchored at its first observation) and grows
+        by :meth:`add_observer_drift` — for the contour model, the covariance of each frame
+        merged into the model, which the next registrations inherit. Without it a drifting
+        observer's errors are treated as independent from frame to frame.
 
     Examples
     --------
@@ -662,9 +670,13 @@ class TwistorUKF(PoseFilter):
         gate_probability: float | None = None,
         centre_offset: bool = False,
         axis_sigma: float = 1e-3,
+        observer_bias: bool = False,
     ) -> None:
         self.centre_offset = bool(centre_offset)
-        self.dim = 18 if self.centre_offset else 15
+        self.observer_bias = bool(observer_bias)
+        self._ib = 18 if self.centre_offset else 15
+        self.dim = self._ib + (6 if self.observer_bias else 0)
+        self._b = np.zeros(6)
         if not (math.isfinite(float(axis_sigma)) and float(axis_sigma) > 0.0):
             raise ConfigError(f"axis_sigma must be > 0 m, got {axis_sigma!r}")
         self.axis_sigma = float(axis_sigma)
@@ -723,8 +735,29 @@ class TwistorUKF(PoseFilter):
     def _on_reset(self) -> None:
         self._prop = None
         self._c = np.zeros(3)
+        self._b = np.zeros(6)
         if self.centre_offset:
             self._P[15:18, 15:18] = np.eye(3) * self.p0.offset**2
+        if self.observer_bias:
+            ib = self._ib
+            self._P[ib : ib + 6, ib : ib + 6] = np.diag([1e-8] * 3 + [1e-10] * 3)
+
+    def add_observer_drift(self, Q: np.ndarray) -> None:
+        """Add ``Q`` ``(6, 6)`` (``[m, rad]``) to the observer bias's covariance (no-op without
+        ``observer_bias``)."""
+        if not self.observer_bias:
+            return
+        Q = np.asarray(Q, dtype=np.float64)
+        if Q.shape != (6, 6) or not np.all(np.isfinite(Q)):
+            raise InputError(f"observer drift must be a finite (6, 6) matrix, got {Q.shape}")
+        ib = self._ib
+        self._P[ib : ib + 6, ib : ib + 6] += _sym(Q)
+        self._prop = None
+
+    @property
+    def observer_bias_estimate(self) -> np.ndarray:
+        """Current observer bias ``[β_p (m), β_θ (rad)]`` ``(6,)`` (zeros without it)."""
+        return self._b.copy()
 
     @property
     def offset(self) -> np.ndarray:
@@ -821,6 +854,9 @@ class TwistorUKF(PoseFilter):
         c_m = self.Wm @ c
         if self.centre_offset:
             dX[:, 15:18] = c - c_m
+        if self.observer_bias:
+            ib = self._ib
+            dX[:, ib : ib + 6] = chi[:, ib : ib + 6]  # β is constant over the step
         P = (dX * self.Wc[:, None]).T @ dX
         P += self._native_from_phys_var(self._phys_process_var(dt))
         self._d, self._v, self._q, self._w, self._c = d_m, v_m, q_m, w_m, c_m
@@ -851,13 +887,18 @@ class TwistorUKF(PoseFilter):
         return cayley(dq_multiply(dq_conjugate(self._pose_dq()), dq_from_rt(q, d)))
 
     def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
-        if self.update_sigma == "propagated" and self._prop is not None:
+        if self.update_sigma == "propagated" and self._prop is not None and not self.observer_bias:
             dX = self._prop["dX"]
             d_i, q_i = self._prop["d"], self._prop["q"]
         else:
             dX = self.sigma_points()
             d_i, _, q_i, _ = self._apply_sigma(dX)
             d_i = self._reference(d_i, q_i, self._sigma_offset(dX))
+            if self.observer_bias:
+                ib = self._ib
+                b = self._b + dX[:, ib : ib + 6]
+                d_i = d_i + b[:, 0:3]
+                q_i = _canon_q(_qmul(q_i, quat_delta(b[:, 3:6], 1.0)))
         Z = self._meas_of(d_i, q_i)
         z_hat = self.Wm @ Z
         dZ = Z - z_hat
@@ -895,6 +936,8 @@ class TwistorUKF(PoseFilter):
         self._w = self._w + dx[12:15]
         if self.centre_offset:
             self._c = self._c + dx[15:18]
+        if self.observer_bias:
+            self._b = self._b + dx[self._ib : self._ib + 6]
 
     def _axis_constraint(self) -> None:
         """Pseudo-measurement ``ω̂ · c = 0`` (class docstring), a linear Kalman update."""
@@ -922,5 +965,6 @@ class TwistorUKF(PoseFilter):
             update_sigma=self.update_sigma,
             covariance_update=self.covariance_update,
             centre_offset=self.centre_offset,
+            observer_bias=self.observer_bias,
         )
         return out
