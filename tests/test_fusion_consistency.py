@@ -52,7 +52,7 @@ def test_centre_offset_follows_a_circling_reference_point() -> None:
 
 
 def test_centre_offset_estimate_and_axis_constraint() -> None:
-    t, obs, _ = simulate_observations(30, 4.5, offset=(0.05, -0.03, 0.02), seed=3)
+    _, obs, _ = simulate_observations(30, 4.5, offset=(0.05, -0.03, 0.02), seed=3)
     f = TwistorUKF(dt=4.5, omega0=OMEGA0, centre_offset=True)
     f.initialize(obs[0].position, obs[0].quat_xyzw, omega=OMEGA0)
     for k in range(1, 30):
@@ -134,7 +134,7 @@ def test_innovation_noise_scale_inflates_a_too_small_r() -> None:
     nis = {"fixed": [], "innovation": []}
     lam = []
     for seed in range(20):
-        t, obs, truth = simulate_observations(
+        t, obs, _ = simulate_observations(
             16, 4.5, sigma_position=0.03, sigma_attitude_deg=3.0, seed=seed
         )
         for mode in nis:
@@ -166,8 +166,9 @@ def test_csv_and_consistency_report(tmp_path: Path) -> None:
 
 
 def test_contour_model_covariance_options() -> None:
-    from relnav.fusion.reconstruction import ContourModel
     from tests.test_fusion_reconstruction import _frames
+
+    from relnav.fusion.reconstruction import ContourModel
 
     clouds, _ = _frames(3)
     for mode in ("jackknife", "icp", "none"):
