@@ -155,7 +155,9 @@ def track(
     ),
     max_frames: int = typer.Option(None, "--max-frames", help="Use the first N frames."),
     gt_alignment: str = typer.Option(
-        "mean", "--gt-alignment", help="Truth in the estimate's body frame: mean | first | none."
+        "mean",
+        "--gt-alignment",
+        help="Truth in the estimate's body frame: mean | first | first-rotation | none.",
     ),
     seed: int = typer.Option(0, "--seed", help="Observer seed."),
     option: list[str] = typer.Option(

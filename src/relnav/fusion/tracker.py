@@ -1057,8 +1057,13 @@ def _align_truth(
     elif how == "mean":
         A[:3, :3] = project_to_so3(rel_R.sum(axis=0))
         A[:3, 3] = rel_t.mean(axis=0)
+    elif how == "first-rotation":
+        A[:3, :3] = project_to_so3(rel_R[0])
+        A[:3, 3] = rel_t.mean(axis=0)
     else:
-        raise ConfigError(f"gt_alignment must be 'mean', 'first' or 'none', got {how!r}")
+        raise ConfigError(
+            "gt_alignment must be 'mean', 'first', 'first-rotation' or 'none', got " + repr(how)
+        )
     return T_gt @ A, A
 
 
@@ -1094,7 +1099,7 @@ def track_sequence(
     second_sensor: str | None = "auto",
     max_frames: int | None = None,
     require_all_sensors: bool = True,
-    gt_alignment: Literal["mean", "first", "none"] = "mean",
+    gt_alignment: Literal["mean", "first", "first-rotation", "none"] = "mean",
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
     **tracker_options: Any,
@@ -1117,8 +1122,12 @@ def track_sequence(
     require_all_sensors : bool
         A frame where any used sensor has no scan (no scan within half a frame period, or an
         empty scan) gets no observation (predicted through, ``"flagged: missing scan"``).
-    gt_alignment : {"mean", "first", "none"}
+    gt_alignment : {"mean", "first", "first-rotation", "none"}
         How truth is expressed in the estimate's body frame (module docstring).
+        ``"first-rotation"``: rotation from the first estimated frame (exact for the contour
+        and registration observers, whose body axes are by definition the sensor axes at
+        their first observation and which initialize the filter there), translation the mean
+        offset.
     seed : int
         Seed of the observer's random choices (recorded in ``meta``).
     progress : callable, optional
