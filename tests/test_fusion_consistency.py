@@ -188,3 +188,30 @@ def test_contour_model_covariance_options() -> None:
         ContourModel(covariance="bootstrap")
     with pytest.raises(ConfigError):
         ContourModel(jackknife_blocks=2)
+
+
+def test_first_rotation_alignment_takes_axes_from_the_first_frame() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from relnav.fusion.tracker import _align_truth
+
+    rng = np.random.default_rng(0)
+    K = 8
+    T_gt = np.tile(np.eye(4), (K, 1, 1))
+    T_gt[:, :3, :3] = Rotation.from_rotvec(rng.normal(size=(K, 3))).as_matrix()
+    T_gt[:, :3, 3] = rng.normal(size=(K, 3))
+    A = np.eye(4)
+    A[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    A[:3, 3] = [0.05, 0.0, -0.02]
+    est = T_gt @ A
+    tilt = Rotation.from_rotvec(rng.normal(size=(K, 3)) * 0.02).as_matrix()
+    tilt[0] = np.eye(3)  # exact at the first frame, drifting later
+    R_est = est[:, :3, :3] @ tilt
+    q = Rotation.from_matrix(R_est).as_quat()
+    _, A1 = _align_truth(T_gt, est[:, :3, 3], q, "first-rotation")
+    np.testing.assert_allclose(A1[:3, :3], A[:3, :3], atol=1e-12)
+    np.testing.assert_allclose(A1[:3, 3], A[:3, 3], atol=1e-12)
+    _, Am = _align_truth(T_gt, est[:, :3, 3], q, "mean")
+    assert not np.allclose(Am[:3, :3], A[:3, :3], atol=1e-6)
+    with pytest.raises(ConfigError):
+        _align_truth(T_gt, est[:, :3, 3], q, "median")
