@@ -85,14 +85,18 @@ PAPER = {
 }
 
 
-def simulate_seed(seed: int, folder: Path, frames: int, distance: float) -> Path:
-    """Simulate the li-rotating run of ``seed`` into ``folder`` (skipped when present)."""
+def simulate_seed(
+    seed: int, folder: Path, frames: int, distance: float, extra: dict[str, str] | None = None
+) -> Path:
+    """Simulate the li-rotating run of ``seed`` into ``folder`` (skipped when present);
+    ``extra``: dotted scenario overrides (``relnav simulate --param``)."""
     from relnav.cli.simulate import build_scenario
     from relnav.sim.scenario import simulate
 
     if (folder / "scans").is_dir() and any((folder / "scans").iterdir()):
         return folder
-    sc = build_scenario("li-rotating", frames=frames, seed=seed, params={"distance": str(distance)})
+    params = {"distance": str(distance), **(extra or {})}
+    sc = build_scenario("li-rotating", frames=frames, seed=seed, params=params)
     simulate(sc, folder, overwrite=True)
     return folder
 
@@ -314,7 +318,8 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         f"`python benchmarks/paper2_experiment.py --out {meta['out']} --seeds {meta['seeds']}` — "
         f"li-rotating at {meta['distance']} m, {meta['frames']} frames at 4.5 s (5°/s about z, "
         f"0.22 Hz), seeds 0–{meta['seeds'] - 1}, ω₀ = (0, 0, 5)°/s; errors after the first "
-        f"{meta['skip']} steps; {meta['seconds']:.0f} s wall time.",
+        f"{meta['skip']} steps; {meta['seconds']:.0f} s wall time"
+        + (f"; scenario overrides {meta['sim_param']}." if meta["sim_param"] else "."),
         "",
         f"Main variant: `{MAIN}` (contour-model observations with their jackknife covariance, "
         "centre-offset state, observer-drift bias state).",
@@ -507,6 +512,13 @@ def main() -> None:
     ap.add_argument("--distance", type=float, default=3.0)
     ap.add_argument("--skip", type=int, default=3, help="steps ignored in the error statistics")
     ap.add_argument("--work", type=Path, default=None, help="keep sequences/results here")
+    ap.add_argument(
+        "--sim-param",
+        action="append",
+        default=[],
+        help="dotted scenario override KEY=VALUE (repeatable), e.g. "
+        "sensors.0.overrides.sigma_coeff=0 for a noiseless Kinect",
+    )
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = None
@@ -520,12 +532,16 @@ def main() -> None:
     runs = []
     recs = []
     for seed in range(args.seeds):
-        cache = work / f"obs{seed:03d}_{args.frames}f_{args.distance:g}m.npz"
+        tag = "_".join(p.replace("=", "-") for p in sorted(args.sim_param))
+        cache = work / f"obs{seed:03d}_{args.frames}f_{args.distance:g}m{tag and '_' + tag}.npz"
         ts = time.perf_counter()
         if cache.is_file():
             rec = dict(np.load(cache))
         else:
-            seq = simulate_seed(seed, work / f"seq{seed:03d}", args.frames, args.distance)
+            extra = dict(p.split("=", 1) for p in args.sim_param)
+            seq = simulate_seed(
+                seed, work / f"seq{seed:03d}{tag and '_' + tag}", args.frames, args.distance, extra
+            )
             rec = observe_seed(seed, seq)
             np.savez(cache, **rec)
         r = run_variants(rec)
@@ -547,6 +563,7 @@ def main() -> None:
         "distance": args.distance,
         "skip": args.skip,
         "seconds": seconds,
+        "sim_param": args.sim_param,
     }
     (args.out / "results.json").write_text(
         json.dumps({"meta": meta, "observer": agg_obs, "variants": agg}, indent=1)
