@@ -398,6 +398,14 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
     path.write_text("\n".join(lines) + "\n")
 
 
+def _save(fig: Any, path: Path) -> None:
+    """Write a small PNG (90 dpi, 256-colour palette)."""
+    from PIL import Image
+
+    fig.savefig(path, dpi=90)
+    Image.open(path).convert("RGB").quantize(256).save(path, optimize=True)
+
+
 def _fig(nrows: int = 2, ncols: int = 2) -> tuple[Any, Any]:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -438,7 +446,7 @@ def plot_seed0(r: dict[str, np.ndarray], path: Path) -> None:
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(f"Paper 2 simulation (li-rotating, seed 0) — {MAIN}")
-    fig.savefig(path, dpi=100)
+    _save(fig, path)
 
 
 def plot_errors(runs: list[dict[str, dict[str, np.ndarray]]], path: Path) -> None:
@@ -464,7 +472,7 @@ def plot_errors(runs: list[dict[str, dict[str, np.ndarray]]], path: Path) -> Non
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(f"errors of every seed, mean ±3σ dotted — {MAIN}")
-    fig.savefig(path, dpi=100)
+    _save(fig, path)
 
 
 def plot_ukf_vs_ekf(runs: list[dict[str, dict[str, np.ndarray]]], path: Path) -> None:
@@ -485,7 +493,7 @@ def plot_ukf_vs_ekf(runs: list[dict[str, dict[str, np.ndarray]]], path: Path) ->
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(f"UKF ({a}, solid) vs quaternion EKF ({b}, dashed), same observations")
-    fig.savefig(path, dpi=100)
+    _save(fig, path)
 
 
 def plot_consistency(agg: dict[str, Any], t: np.ndarray, path: Path) -> None:
@@ -504,7 +512,7 @@ def plot_consistency(agg: dict[str, Any], t: np.ndarray, path: Path) -> None:
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
-    fig.savefig(path, dpi=100)
+    _save(fig, path)
 
 
 def main() -> None:
