@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 
@@ -206,7 +207,11 @@ def test_cli_track_smoke(tmp_path: Path) -> None:
     for name in ("track.csv", "track.json", "track.png", "track_errors.png"):
         assert (out / name).is_file(), name
     rows = list(csv.DictReader((out / "track.csv").open()))
-    assert len(rows) == 6 and "sigma_wz" in rows[0]
+    assert len(rows) == 6 and "sigma_wz" in rows[0] and "nees" in rows[0]
+    info = json.loads((out / "track.json").read_text())
+    lo, hi = info["consistency"]["nees"]["band"]
+    assert info["consistency"]["nis"]["dof"] == 6 and lo < 12 < hi
+    assert "mean NIS" in r.output
     bad = CliRunner().invoke(
         app, ["track", str(tmp_path / "seq"), "--out", str(out), "--omega0", "1,2"]
     )
