@@ -161,7 +161,7 @@ class QuaternionEKF(PoseFilter):
         nis = float(nu @ np.linalg.solve(S, nu))
         reason = self._gate(nis, 6)
         if reason:
-            return UpdateInfo(False, nis, nu, reason)
+            return UpdateInfo(False, nis, nu, reason, S, R)
         K = np.linalg.solve(S, H @ P).T
         dx = K @ nu
         if self.covariance_update == "joseph":
@@ -175,7 +175,7 @@ class QuaternionEKF(PoseFilter):
         self._q = _canon_q(_qmul(self._q, np.r_[0.5 * dth, 1.0]))
         self._w = self._w + dx[9:12]
         self._P = _sym(P)
-        return UpdateInfo(True, nis, nu, "")
+        return UpdateInfo(True, nis, nu, "", S, R)
 
     def settings(self) -> dict[str, Any]:
         """Configuration as plain values."""

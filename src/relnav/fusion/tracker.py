@@ -27,6 +27,7 @@ the body-axis rotation vector of ``R_gtᵀ R_est`` (degrees in reports).
 
 from __future__ import annotations
 
+import copy
 import csv
 import logging
 import math
@@ -37,6 +38,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from relnav.errors import ConfigError, InputError, RelnavError
 from relnav.fusion.dynamics import ClohessyWiltshire, mean_motion
@@ -83,12 +85,16 @@ class Observation:
         Observer's quality score (e.g. registration fitness, 1 = best).
     R : (6, 6) ndarray, optional
         Covariance of ``[δp (m), δθ (rad)]``; default: the filter's.
+    drift : (6, 6) ndarray, optional
+        Growth of the observer's own slowly varying error since its previous observation
+        (same coordinates), for ``TwistorUKF(observer_bias=True)``.
     """
 
     position: np.ndarray
     quat_xyzw: np.ndarray
     quality: float = 1.0
     R: np.ndarray | None = None
+    drift: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.position, dtype=np.float64)
@@ -196,6 +202,8 @@ class TrackResult:
         Ground truth on the same steps.
     meta : dict
         Free-form metadata (sequence folder, observer, seed, alignment...).
+    noise_scale : (K,), optional
+        Measurement-covariance scale ``λ`` used per step (``Tracker(noise_scale=...)``).
     """
 
     time: np.ndarray
@@ -211,6 +219,7 @@ class TrackResult:
     settings: dict[str, Any] = field(default_factory=dict)
     truth: TrackTruth | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    noise_scale: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)
@@ -282,6 +291,34 @@ class TrackResult:
                 out[k] = float(err[k] @ np.linalg.solve(self.covariance[k], err[k]))
         return out
 
+    def consistency(self, probability: float = 0.95) -> dict[str, Any]:
+        """Mean NIS over the updates and mean NEES over the estimated steps (after the
+        initializing one), each with the two-sided ``probability`` band of the mean of that
+        many independent χ² values (``χ²_{m·n}/n``; m = 6 for NIS, 12 for NEES).
+
+        Returns
+        -------
+        dict
+            ``{"nis": {"mean", "n", "dof", "band"}, "nees": {...} or None}``.
+        """
+        a = (1.0 - probability) / 2.0
+
+        def block(x: np.ndarray, dof: int) -> dict[str, Any] | None:
+            x = x[np.isfinite(x)]
+            if x.size == 0:
+                return None
+            n = int(x.size)
+            band = [float(chi2.ppf(a, dof * n) / n), float(chi2.ppf(1.0 - a, dof * n) / n)]
+            return {"mean": float(x.mean()), "n": n, "dof": dof, "band": band}
+
+        upd = np.array([st == "update" for st in self.status])
+        out: dict[str, Any] = {"nis": block(np.where(upd, self.nis, np.nan), 6), "nees": None}
+        if self.truth is not None:
+            ne = self.nees()
+            est = np.array([st not in ("init", "waiting") for st in self.status])
+            out["nees"] = block(np.where(est, ne, np.nan), 12)
+        return out
+
     def summary(self, skip: int | float = 0.2) -> dict[str, dict[str, list[float]]]:
         """RMS and max absolute error per axis after convergence.
 
@@ -349,6 +386,9 @@ class TrackResult:
             put("err_v", e["velocity"])
             put("err_att_", np.degrees(e["attitude"]))
             put("err_w", np.degrees(e["omega"]))
+            cols["nees"] = self.nees()
+        if self.noise_scale is not None:
+            cols["noise_scale"] = np.asarray(self.noise_scale, dtype=np.float64)
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
@@ -377,6 +417,7 @@ class _TrackLog:
         self.cov = np.full((K, 12, 12), np.nan)
         self.nis = np.full(K, np.nan)
         self.obs = np.full((K, 7), np.nan)
+        self.lam = np.full(K, np.nan)
         self.status: list[str] = []
 
     def record(
@@ -420,6 +461,7 @@ class _TrackLog:
             settings=settings,
             truth=truth,
             meta=meta,
+            noise_scale=self.lam,
         )
 
 
@@ -464,6 +506,15 @@ class Tracker:
         ``"first"``: initialize position and attitude from the first usable observation (steps
         before it are ``"waiting"``); ``"prior"``: start from the filter's initial state
         (``position0``/``quat0`` in ``filter_options``).
+    noise_scale : {"fixed", "innovation"}
+        ``"fixed"``: each update uses the observation's covariance (or the filter's ``r``) as
+        is. ``"innovation"`` **[interpretation]**: covariance matching on the innovations seen
+        so far — before each update the measurement covariance is multiplied by the scalar
+        ``λ ≥ 1`` that makes the mean NIS of the updates so far, this one included
+        (re-evaluated with ``S_j = H P_j Hᵀ + λ R_j``), equal to the measurement dimension;
+        ``λ = 1`` without an innovation. Only the measurements up to the current one
+        are used (causal, no ground truth); ``λ`` per step is in
+        :attr:`TrackResult.noise_scale`.
     **filter_options
         Passed to the filter (``q``, ``r``, ``p0``, ``alpha``, ``kappa``, ``lvlh_axes``,
         ``translation_model``, ``jacobian``, ``gate_probability`` …).
@@ -486,6 +537,7 @@ class Tracker:
         velocity0: Any = None,
         min_quality: float = 0.0,
         init: Literal["first", "prior"] = "first",
+        noise_scale: Literal["fixed", "innovation"] = "fixed",
         **filter_options: Any,
     ) -> None:
         if n_mean_motion is not None and orbit_radius_m is not None:
@@ -502,6 +554,11 @@ class Tracker:
         self.velocity0 = None if velocity0 is None else np.asarray(velocity0, dtype=np.float64)
         self.min_quality = float(min_quality)
         self.init = init
+        if noise_scale not in ("fixed", "innovation"):
+            raise ConfigError(f"noise_scale must be 'fixed' or 'innovation', got {noise_scale!r}")
+        self.noise_scale = noise_scale
+        self.lam = 1.0
+        self._innov: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.filter_options = dict(filter_options)
         make_filter(self.filter_name, n_mean_motion=n, **self._opts(1.0))  # validate early
         self.filter: PoseFilter | None = None
@@ -525,6 +582,32 @@ class Tracker:
         )
         self._t = None
         self._initialized = self.init == "prior"
+        self.lam = 1.0
+        self._innov = []
+
+    def _match_scale(self) -> float:
+        """``λ ≥ 1`` with mean ``νᵀ(A + λR)⁻¹ν`` over the past updates = their dimension."""
+        if not self._innov:
+            return 1.0
+        m = float(np.mean([nu.size for nu, _, _ in self._innov]))
+
+        def mean_nis(lam: float) -> float:
+            return float(
+                np.mean([nu @ np.linalg.solve(A + lam * R, nu) for nu, A, R in self._innov])
+            )
+
+        if mean_nis(1.0) <= m:
+            return 1.0
+        lo, hi = 0.0, math.log(1e6)
+        if mean_nis(math.exp(hi)) > m:
+            return math.exp(hi)
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if mean_nis(math.exp(mid)) > m:
+                lo = mid
+            else:
+                hi = mid
+        return math.exp(hi)
 
     def _usable(self, obs: Observation | None) -> str:
         """``""`` if ``obs`` can be used, else the reason."""
@@ -578,7 +661,18 @@ class Tracker:
         if reason:
             return f"flagged: {reason}", math.nan
         assert obs is not None
-        info = f.update(obs.position, obs.quat_xyzw, R=obs.R)
+        R = obs.R
+        if obs.drift is not None and hasattr(f, "add_observer_drift"):
+            f.add_observer_drift(obs.drift)
+        if self.noise_scale == "innovation":
+            R0 = f.R if R is None else np.asarray(R, dtype=np.float64)
+            probe = copy.deepcopy(f).update(obs.position, obs.quat_xyzw, R=R0)
+            if probe.meas_cov.size and np.all(np.isfinite(probe.innovation)):
+                A = probe.innovation_cov - probe.meas_cov
+                self._innov.append((probe.innovation, A, probe.meas_cov))
+            self.lam = self._match_scale()
+            R = R0 * self.lam
+        info = f.update(obs.position, obs.quat_xyzw, R=R)
         if not info.accepted:
             return f"flagged: {info.message}", info.nis
         return "update", info.nis
@@ -627,6 +721,7 @@ class Tracker:
             o = observations[k]
             st, ni = self.step(t[k], o)
             rec.record(k, self.filter, self._initialized, st, ni, o)
+            rec.lam[k] = self.lam
             if progress is not None:
                 progress(k + 1, K)
         assert self.filter is not None
@@ -651,6 +746,7 @@ def simulate_observations(
     sigma_position: float = 0.01,
     sigma_attitude_deg: float = 1.0,
     missing: Sequence[int] = (),
+    offset: Sequence[float] = (0.0, 0.0, 0.0),
     seed: int | np.random.Generator | None = 0,
 ) -> tuple[np.ndarray, list[Observation | None], TrackTruth]:
     """Observations of a target spinning at a constant body rate, with CW relative translation.
@@ -673,6 +769,11 @@ def simulate_observations(
         Measurement noise 1σ (m, deg).
     missing : sequence of int
         Steps without an observation (``None``).
+    offset : (3,) array_like
+        Body-frame offset (m) of the observed reference point from the rotation centre: the
+        observed position is ``d + R c`` (it circles the spin axis). Truth is the point of
+        the spin axis nearest the reference point, ``d + R c_∥`` with ``c_∥`` the component
+        of ``c`` along ``ω`` (the component the observations can resolve).
     seed : int or Generator
         Noise seed.
 
@@ -705,9 +806,16 @@ def simulate_observations(
     noise_p = rng.normal(size=(K, 3)) * sigma_position
     noise_q = Rotation.from_rotvec(rng.normal(size=(K, 3)) * math.radians(sigma_attitude_deg))
     zq = _qmul(Qs, noise_q.as_quat())
+    c = np.asarray(offset, dtype=np.float64).reshape(3)
+    Rk = quat_to_matrix(Qs)
+    ref = P + Rk @ c
+    nw = float(np.linalg.norm(w))
+    if nw > 0.0 and np.any(c != 0.0):
+        u = w / nw
+        P = P + Rk @ (u * float(u @ c))  # constant: R_k u = R_0 u for a body-fixed rate
     miss = {int(i) for i in missing}
     obs: list[Observation | None] = [
-        None if k in miss else Observation(P[k] + noise_p[k], zq[k]) for k in range(K)
+        None if k in miss else Observation(ref[k] + noise_p[k], zq[k]) for k in range(K)
     ]
     truth = TrackTruth(P, V, Qs, np.tile(w, (K, 1)))
     return times, obs, truth
@@ -867,6 +975,7 @@ class ContourObserver:
         self.fallback_camera_only = bool(fallback_camera_only)
         self.name = "contour"
         self.n_fusion_failed = 0
+        self._last_R: np.ndarray | None = None
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -913,7 +1022,11 @@ class ContourObserver:
         if quality <= 0.0:
             reason = self.model.history[-1].get("reason", "rejected") if self.model.history else ""
             raise InputError(f"frame {k}: contour model: {reason}")
-        return Observation(np.asarray(position), np.asarray(quat), float(quality))
+        R = self.model.last_covariance  # None → the filter's fixed noise
+        # [interpretation] the frame merged last carries its pose error into the model, which
+        # the following registrations inherit: that is the observer's drift since then
+        drift, self._last_R = self._last_R, R
+        return Observation(np.asarray(position), np.asarray(quat), float(quality), R=R, drift=drift)
 
 
 def _default_observer(second: str | None, seed: int) -> Observer:
@@ -944,8 +1057,13 @@ def _align_truth(
     elif how == "mean":
         A[:3, :3] = project_to_so3(rel_R.sum(axis=0))
         A[:3, 3] = rel_t.mean(axis=0)
+    elif how == "first-rotation":
+        A[:3, :3] = project_to_so3(rel_R[0])
+        A[:3, 3] = rel_t.mean(axis=0)
     else:
-        raise ConfigError(f"gt_alignment must be 'mean', 'first' or 'none', got {how!r}")
+        raise ConfigError(
+            "gt_alignment must be 'mean', 'first', 'first-rotation' or 'none', got " + repr(how)
+        )
     return T_gt @ A, A
 
 
@@ -981,7 +1099,7 @@ def track_sequence(
     second_sensor: str | None = "auto",
     max_frames: int | None = None,
     require_all_sensors: bool = True,
-    gt_alignment: Literal["mean", "first", "none"] = "mean",
+    gt_alignment: Literal["mean", "first", "first-rotation", "none"] = "mean",
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
     **tracker_options: Any,
@@ -1004,14 +1122,21 @@ def track_sequence(
     require_all_sensors : bool
         A frame where any used sensor has no scan (no scan within half a frame period, or an
         empty scan) gets no observation (predicted through, ``"flagged: missing scan"``).
-    gt_alignment : {"mean", "first", "none"}
+    gt_alignment : {"mean", "first", "first-rotation", "none"}
         How truth is expressed in the estimate's body frame (module docstring).
+        ``"first-rotation"``: rotation from the first estimated frame (exact for the contour
+        and registration observers, whose body axes are by definition the sensor axes at
+        their first observation and which initialize the filter there), translation the mean
+        offset.
     seed : int
         Seed of the observer's random choices (recorded in ``meta``).
     progress : callable, optional
         ``progress(done, total)``.
     **tracker_options
         Passed to :class:`Tracker` (``n_mean_motion``, ``orbit_radius_m``, ``q``, ``r`` …).
+        With the UKF and the contour observer, ``centre_offset`` and ``observer_bias`` default
+        to ``True`` (:class:`relnav.fusion.ukf.TwistorUKF`): its reference point is the first
+        frame's centroid, which circles the spin axis, and its model drifts.
 
     Returns
     -------
@@ -1059,6 +1184,10 @@ def track_sequence(
     else:
         obs_impl = observer
 
+    if str(filter).lower() == "ukf" and isinstance(obs_impl, ContourObserver):
+        # the contour model's reference point circles the spin axis and the model drifts
+        tracker_options.setdefault("centre_offset", True)
+        tracker_options.setdefault("observer_bias", True)
     tracker = Tracker(filter, **tracker_options)
     steps = np.diff(times)
     steps = steps[steps > 0]
@@ -1094,6 +1223,7 @@ def track_sequence(
         if msg and st in ("predict", "waiting"):
             st = f"flagged: {msg}"
         rec.record(k, f, tracker._initialized, st, ni, o)
+        rec.lam[k] = tracker.lam
         if progress is not None:
             progress(k + 1, n)
 
@@ -1116,9 +1246,10 @@ def track_sequence(
 
 
 def _predicted_pose(f: PoseFilter, dt: float) -> np.ndarray:
-    """``T_s_b`` predicted ``dt`` seconds ahead (mean only, the filter is not changed)."""
+    """``T_s_b`` of the observer's body frame (origin = the reference point) predicted ``dt``
+    seconds ahead (mean only, the filter is not changed)."""
     T = np.eye(4)
-    q = _qmul(f.quaternion, quat_delta(f.omega, max(dt, 0.0)))
-    T[:3, :3] = quat_to_matrix(q / np.linalg.norm(q))
-    T[:3, 3] = f.dynamics.propagate(f.position, f.velocity, max(dt, 0.0))[0]
+    p, q = f.predicted_reference(dt)
+    T[:3, :3] = quat_to_matrix(q)
+    T[:3, 3] = p
     return T

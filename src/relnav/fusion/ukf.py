@@ -157,13 +157,16 @@ class InitialUncertainty:
     """Initial 1σ: position (m), velocity (m/s), attitude (rad), omega (rad/s).
 
     Defaults ``0.1, 0.1, 0.4, 0.1`` equal Paper-2-style ``P₀ = 1e-2 I`` in the UKF's error
-    coordinates (``δθ ≈ 4 B_r``).
+    coordinates (``δθ ≈ 4 B_r``). ``offset`` (m, default 0.1) is the 1σ of the body-frame
+    offset from the rotation centre to the observed reference point (used only by
+    ``TwistorUKF(centre_offset=True)``).
     """
 
     position: float = 0.1
     velocity: float = 0.1
     attitude: float = 0.4
     omega: float = 0.1
+    offset: float = 0.1
 
     def __post_init__(self) -> None:
         _positive_fields(self)
@@ -201,12 +204,18 @@ class UpdateInfo:
         Innovation in the filter's measurement coordinates (empty when rejected early).
     message : str
         Reason for a rejection.
+    innovation_cov : ndarray
+        ``S = H P Hᵀ + R`` in the same coordinates (empty when rejected early).
+    meas_cov : ndarray
+        The ``R`` part of ``S`` (empty when rejected early).
     """
 
     accepted: bool
     nis: float = float("nan")
     innovation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     message: str = ""
+    innovation_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    meas_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def quat_delta(omega: np.ndarray, dt: float) -> np.ndarray:
@@ -395,6 +404,19 @@ class PoseFilter:
     def position(self) -> np.ndarray:
         """Target reference point in the sensor frame ``(3,)``, m."""
         return self._d.copy()
+
+    @property
+    def reference_position(self) -> np.ndarray:
+        """The observed reference point in the sensor frame ``(3,)``, m (= ``position`` unless
+        the filter estimates a centre offset)."""
+        return self._d.copy()
+
+    def predicted_reference(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Mean reference point ``(3,)`` and attitude ``(4,)`` xyzw predicted ``dt`` s ahead
+        (the filter is not changed)."""
+        dt = max(float(dt), 0.0)
+        q = _canon_q(_qmul(self._q, quat_delta(self._w, dt)))
+        return self.dynamics.propagate(self._d, self._v, dt)[0], q
 
     @property
     def velocity(self) -> np.ndarray:
@@ -593,6 +615,25 @@ class TwistorUKF(PoseFilter):
     covariance_update : {"standard", "joseph"}
     gate_probability : float, optional
         Reject measurements whose NIS exceeds the χ² quantile (default: no gate).
+    centre_offset : bool
+        **[interpretation, not in Paper 2]** Estimate the constant body-frame offset ``c``
+        (m) from the rotation centre to the observed reference point: the state's ``d`` is
+        then the rotation centre (it moves by CW), the measured point is ``d + R_s_b c``
+        (error state ``L = 18``, ``δc`` last). An observer whose reference point is the first
+        frame's centroid sees it circle the spin axis, which CW + constant-ω dynamics alone
+        cannot follow. The component of ``c`` along the spin axis is unobservable; a
+        pseudo-measurement ``ω̂ · c = 0`` (1σ ``axis_sigma`` m, applied after each update while
+        ``|ω| > 3σ_ω``) picks the point of the axis nearest the reference point.
+    axis_sigma : float
+        See ``centre_offset`` (m, default 1e-3).
+    observer_bias : bool
+        **[interpretation, not in Paper 2]** Carry the observer's slowly varying error as a
+        6-D random-walk bias ``β = [β_p (m), β_θ (rad)]`` (last in the error state): the
+        measured point is ``d + R c + β_p`` and the measured attitude ``q ⊗ exp(β_θ)``. ``β``
+        starts at zero (the observer's frame is anchored at its first observation) and grows
+        by :meth:`add_observer_drift` — for the contour model, the covariance of each frame
+        merged into the model, which the next registrations inherit. Without it a drifting
+        observer's errors are treated as independent from frame to frame.
 
     Examples
     --------
@@ -627,7 +668,19 @@ class TwistorUKF(PoseFilter):
         update_sigma: UpdateSigma = "redraw",
         covariance_update: CovUpdate = "standard",
         gate_probability: float | None = None,
+        centre_offset: bool = False,
+        axis_sigma: float = 1e-3,
+        observer_bias: bool = False,
     ) -> None:
+        self.centre_offset = bool(centre_offset)
+        self.observer_bias = bool(observer_bias)
+        self._ib = 18 if self.centre_offset else 15
+        self.dim = self._ib + (6 if self.observer_bias else 0)
+        self._b = np.zeros(6)
+        if not (math.isfinite(float(axis_sigma)) and float(axis_sigma) > 0.0):
+            raise ConfigError(f"axis_sigma must be > 0 m, got {axis_sigma!r}")
+        self.axis_sigma = float(axis_sigma)
+        self._c = np.zeros(3)
         L = self.dim
         self.alpha = float(alpha)
         self.beta = float(beta)
@@ -681,9 +734,49 @@ class TwistorUKF(PoseFilter):
 
     def _on_reset(self) -> None:
         self._prop = None
+        self._c = np.zeros(3)
+        self._b = np.zeros(6)
+        if self.centre_offset:
+            self._P[15:18, 15:18] = np.eye(3) * self.p0.offset**2
+        if self.observer_bias:
+            ib = self._ib
+            self._P[ib : ib + 6, ib : ib + 6] = np.diag([1e-8] * 3 + [1e-10] * 3)
+
+    def add_observer_drift(self, Q: np.ndarray) -> None:
+        """Add ``Q`` ``(6, 6)`` (``[m, rad]``) to the observer bias's covariance (no-op without
+        ``observer_bias``)."""
+        if not self.observer_bias:
+            return
+        Q = np.asarray(Q, dtype=np.float64)
+        if Q.shape != (6, 6) or not np.all(np.isfinite(Q)):
+            raise InputError(f"observer drift must be a finite (6, 6) matrix, got {Q.shape}")
+        ib = self._ib
+        self._P[ib : ib + 6, ib : ib + 6] += _sym(Q)
+        self._prop = None
+
+    @property
+    def observer_bias_estimate(self) -> np.ndarray:
+        """Current observer bias ``[β_p (m), β_θ (rad)]`` ``(6,)`` (zeros without it)."""
+        return self._b.copy()
+
+    @property
+    def offset(self) -> np.ndarray:
+        """Body-frame offset ``c`` from the rotation centre to the reference point ``(3,)``, m
+        (zeros without ``centre_offset``)."""
+        return self._c.copy()
+
+    @property
+    def reference_position(self) -> np.ndarray:
+        """Observed reference point ``d + R_s_b c`` in the sensor frame ``(3,)``, m."""
+        return self._d + quat_to_matrix(self._q) @ self._c
+
+    def predicted_reference(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Mean reference point and attitude predicted ``dt`` s ahead (filter unchanged)."""
+        d, q = super().predicted_reference(dt)
+        return d + quat_to_matrix(q) @ self._c, q
 
     def _native_from_phys_var(self, phys_var: np.ndarray) -> np.ndarray:
-        v = np.zeros(15)
+        v = np.zeros(self.dim)
         v[0:6] = phys_var[0:6]
         v[6:9] = phys_var[6:9] / 16.0  # B_r ≈ δθ/4
         v[9:12] = phys_var[0:3] / 16.0  # B_d ≈ R_bsᵀ δd/4 (redundant with δd)
@@ -691,7 +784,7 @@ class TwistorUKF(PoseFilter):
         return np.diag(v)
 
     def _phys_jacobian(self) -> np.ndarray:
-        J = np.zeros((12, 15))
+        J = np.zeros((12, self.dim))
         J[0:6, 0:6] = np.eye(6)
         J[6:9, 6:9] = 4.0 * np.eye(3)
         J[9:12, 12:15] = np.eye(3)
@@ -723,11 +816,24 @@ class TwistorUKF(PoseFilter):
         w = self._w + chi[:, 12:15]
         return d, v, q, w
 
+    def _sigma_offset(self, chi: np.ndarray) -> np.ndarray:
+        """Offsets ``c`` of error sigma points ``(2L+1, 3)`` (the mean's without an offset)."""
+        if not self.centre_offset:
+            return np.broadcast_to(self._c, (chi.shape[0], 3))
+        return self._c + chi[:, 15:18]
+
+    def _reference(self, d: np.ndarray, q: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Reference points ``d + R(q) c`` ``(n, 3)``."""
+        if not self.centre_offset:
+            return d
+        return d + np.einsum("nij,nj->ni", quat_to_matrix(q), c)
+
     # --- predict ------------------------------------------------------------------------------
 
     def _predict(self, dt: float) -> None:
         chi = self.sigma_points()
         d, v, q, w = self._apply_sigma(chi)
+        c = self._sigma_offset(chi)
         # propagate: attitude by body rates (right multiplication), translation by CW
         q = _canon_q(_qmul(q, quat_delta(w, dt)))
         s = np.concatenate([d, v], axis=1) @ self.dynamics.stm(dt).T
@@ -745,11 +851,17 @@ class TwistorUKF(PoseFilter):
         dX[:, 3:6] = v - v_m
         dX[:, 6:12] = cayley(dq_multiply(dq_conjugate(dq_from_rt(q_m, d_m)), dq_from_rt(q, d)))
         dX[:, 12:15] = w - w_m
+        c_m = self.Wm @ c
+        if self.centre_offset:
+            dX[:, 15:18] = c - c_m
+        if self.observer_bias:
+            ib = self._ib
+            dX[:, ib : ib + 6] = chi[:, ib : ib + 6]  # β is constant over the step
         P = (dX * self.Wc[:, None]).T @ dX
         P += self._native_from_phys_var(self._phys_process_var(dt))
-        self._d, self._v, self._q, self._w = d_m, v_m, q_m, w_m
+        self._d, self._v, self._q, self._w, self._c = d_m, v_m, q_m, w_m, c_m
         self._P = _sym(P)
-        self._prop = {"dX": dX, "d": d, "q": q}
+        self._prop = {"dX": dX, "d": self._reference(d, q, c), "q": q}
 
     # --- update -------------------------------------------------------------------------------
 
@@ -775,12 +887,18 @@ class TwistorUKF(PoseFilter):
         return cayley(dq_multiply(dq_conjugate(self._pose_dq()), dq_from_rt(q, d)))
 
     def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
-        if self.update_sigma == "propagated" and self._prop is not None:
+        if self.update_sigma == "propagated" and self._prop is not None and not self.observer_bias:
             dX = self._prop["dX"]
             d_i, q_i = self._prop["d"], self._prop["q"]
         else:
             dX = self.sigma_points()
             d_i, _, q_i, _ = self._apply_sigma(dX)
+            d_i = self._reference(d_i, q_i, self._sigma_offset(dX))
+            if self.observer_bias:
+                ib = self._ib
+                b = self._b + dX[:, ib : ib + 6]
+                d_i = d_i + b[:, 0:3]
+                q_i = _canon_q(_qmul(q_i, quat_delta(b[:, 3:6], 1.0)))
         Z = self._meas_of(d_i, q_i)
         z_hat = self.Wm @ Z
         dZ = Z - z_hat
@@ -792,7 +910,7 @@ class TwistorUKF(PoseFilter):
         nis = float(nu @ np.linalg.solve(Pzz, nu))
         reason = self._gate(nis, nu.size)
         if reason:
-            return UpdateInfo(False, nis, nu, reason)
+            return UpdateInfo(False, nis, nu, reason, Pzz, Rz)
         K = np.linalg.solve(Pzz, Pxz.T).T
         dx = K @ nu
         P_prior = self._P
@@ -802,14 +920,39 @@ class TwistorUKF(PoseFilter):
             H = np.linalg.solve(P_prior, Pxz).T
             IKH = np.eye(self.dim) - K @ H
             P = IKH @ P_prior @ IKH.T + K @ Rz @ K.T
+        self._inject(dx)
+        self._P = _sym(P)
+        self._prop = None
+        if self.centre_offset:
+            self._axis_constraint()
+        return UpdateInfo(True, nis, nu, "", Pzz, Rz)
+
+    def _inject(self, dx: np.ndarray) -> None:
+        """Add an error-state correction to the nominal state."""
         self._d = self._d + dx[0:3]
         self._v = self._v + dx[3:6]
         # q̂ ← q̂ ⊗ cayley⁻¹(δB); its translation is then rebuilt from the updated d
         self._q = _canon_q(_qmul(self._q, quat_cayley_inverse(dx[6:9])))
         self._w = self._w + dx[12:15]
-        self._P = _sym(P)
-        self._prop = None
-        return UpdateInfo(True, nis, nu, "")
+        if self.centre_offset:
+            self._c = self._c + dx[15:18]
+        if self.observer_bias:
+            self._b = self._b + dx[self._ib : self._ib + 6]
+
+    def _axis_constraint(self) -> None:
+        """Pseudo-measurement ``ω̂ · c = 0`` (class docstring), a linear Kalman update."""
+        sw = math.sqrt(max(float(np.trace(self._P[12:15, 12:15])) / 3.0, 0.0))
+        nw = float(np.linalg.norm(self._w))
+        if not nw > 3.0 * sw:
+            return
+        u = self._w / nw
+        H = np.zeros(self.dim)
+        H[15:18] = u
+        PH = self._P @ H
+        S = float(H @ PH) + self.axis_sigma**2
+        K = PH / S
+        self._inject(K * (0.0 - float(u @ self._c)))
+        self._P = _sym(self._P - np.outer(K, K) * S)
 
     def settings(self) -> dict[str, Any]:
         """Configuration as plain values."""
@@ -821,5 +964,7 @@ class TwistorUKF(PoseFilter):
             innovation=self.innovation,
             update_sigma=self.update_sigma,
             covariance_update=self.covariance_update,
+            centre_offset=self.centre_offset,
+            observer_bias=self.observer_bias,
         )
         return out
