@@ -133,7 +133,7 @@ class StepChecker:
         *,
         tolerance_m: float = 0.5,
         tolerance_deg: float = 5.0,
-        referee_factor: float = 0.8,
+        referee_factor: float = 1.0,
         loop_factor: float = 0.7,
     ) -> None:
         from relnav.registration.icp import ICP
@@ -197,9 +197,7 @@ class StepChecker:
         info: dict[str, Any] = {"mode": self.mode}
         reasons: list[str] = []
         if source_referee is not None and target_referee is not None:
-            ref = self.referee.register_prepared(
-                source_referee.cloud, target_referee.cloud, init=T
-            )
+            ref = self.referee.register_prepared(source_referee.cloud, target_referee.cloud, init=T)
             info["referee_status"] = ref.status
             if ref.status == "ok":
                 d_rot, d_t = _difference(T, ref.T_target_source)
