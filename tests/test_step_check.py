@@ -52,6 +52,7 @@ def test_resolve_modes():
     assert resolve_step_check("auto", "icp-point") == "full"
     assert resolve_step_check("auto", "icp-plane") == "backward"
     assert resolve_step_check("auto", "feature:hods+gcc+alphabeta") == "referee"
+    assert resolve_step_check("auto", "feature:hods+gcc+svd", {"refine": "icp-plane"}) == "backward"
     assert resolve_step_check("auto", "kiss-icp") == "off"
     assert resolve_step_check(True, object()) == "off"  # objects may be stateful
     assert resolve_step_check("full", object()) == "full"

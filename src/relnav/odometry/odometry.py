@@ -97,8 +97,9 @@ class Odometry:
     step_check : {"auto", "off", "referee", "backward", "full"} or bool
         Re-examine every ``ok`` step without ground truth and flag the doubtful ones
         (:mod:`relnav.odometry.step_check`; ``auto``: forward–backward and a point-to-plane
-        referee for point-to-point ICP, forward–backward for point-to-plane ICP, the referee
-        for feature pipelines, off for other methods and for registration objects).
+        referee for point-to-point ICP, forward–backward for point-to-plane ICP and for feature
+        pipelines refined by ICP, the referee for other feature pipelines, off for other
+        methods and for registration objects).
     step_tolerance_m, step_tolerance_deg : float
         Accuracy a step must have to stay ``ok`` (m, degrees; default 0.5 m, 5°).
     **method_options
@@ -134,7 +135,7 @@ class Odometry:
         self.registration = (
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
-        check = resolve_step_check(step_check, method)
+        check = resolve_step_check(step_check, method, method_options)
         self.step_checker: StepChecker | None = (
             None
             if check == "off"

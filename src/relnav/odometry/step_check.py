@@ -55,7 +55,8 @@ STEP_CHECK_MODES: tuple[str, ...] = ("auto", "off", "referee", "backward", "full
 """``off``: no check; ``referee``: point-to-plane referee only; ``backward``: forward–backward
 only; ``full``: both; ``auto``: both for point-to-point ICP, forward–backward for
 point-to-plane ICP (a point-to-plane referee would repeat the method), the referee for feature
-pipelines (their second registration doubles the time per frame), ``off`` for other methods."""
+pipelines (their second registration doubles the time per frame) or forward–backward for those
+refined by ICP (preset ``extended``), ``off`` for other methods."""
 
 CHECKED_FAMILIES: dict[str, str] = {
     "icp-point": "full",
@@ -69,7 +70,7 @@ CHECKED_FAMILIES: dict[str, str] = {
 KISS-ICP, relnav's navigator with its own checks, user objects) are not re-run."""
 
 
-def resolve_step_check(mode: Any, method: Any) -> str:
+def resolve_step_check(mode: Any, method: Any, options: dict[str, Any] | None = None) -> str:
     """The checks to run (``off``, ``referee`` or ``full``) for ``mode`` and a method.
 
     Parameters
@@ -79,6 +80,9 @@ def resolve_step_check(mode: Any, method: Any) -> str:
     method : str or Registration
         The method string, or a registration object (``auto`` is ``off`` for objects: they
         may be stateful, and a second call would disturb them).
+    options : dict, optional
+        The method's options: a feature pipeline refined by ICP (``refine``) is checked
+        forward–backward (a point-to-plane referee would repeat its refinement).
 
     Raises
     ------
@@ -99,6 +103,8 @@ def resolve_step_check(mode: Any, method: Any) -> str:
     if not isinstance(method, str):
         return "off"
     family = method.strip().lower().partition(":")[0]
+    if family == "feature" and (options or {}).get("refine"):
+        return "backward"
     return CHECKED_FAMILIES.get(family, "off")
 
 
