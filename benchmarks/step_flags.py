@@ -6,6 +6,7 @@ and the mode under test (``auto`` by default) — and prints, per run:
 * ``wrong``: steps whose applied step is off the ground truth by more than 0.5 m or 5° (the
   ground truth is used for this evaluation only, never by the checks);
 * ``recall``: share of the wrong steps that are not ``ok`` (flagged, degenerate or failed);
+* ``gross``: the same for the steps wrong by more than twice that (1 m or 10°), with their count;
 * ``false``: share of the right steps that are not ``ok``;
 * ``ms off`` / ``ms on`` and their ratio: median wall-clock time per frame.
 
@@ -59,14 +60,15 @@ def _ensure(data: Path, name: str) -> Path:
     return out
 
 
-def _wrong(seq: ScanSequence, steps: list) -> np.ndarray:
+def _wrong(seq: ScanSequence, steps: list, factor: float = 1.0) -> np.ndarray:
+    """Steps (from the second frame) off the ground truth by > factor × (0.5 m or 5°)."""
     gt = seq.gt_poses
     w = np.zeros(len(steps), dtype=bool)
     for k in range(1, len(steps)):
         D = invert(invert(gt[k - 1]) @ gt[k]) @ steps[k].step
         w[k] = (
-            np.degrees(rotation_angle(D[:3, :3])) > WRONG_DEG
-            or float(np.linalg.norm(D[:3, 3])) > WRONG_M
+            np.degrees(rotation_angle(D[:3, :3])) > factor * WRONG_DEG
+            or float(np.linalg.norm(D[:3, 3])) > factor * WRONG_M
         )
     return w[1:]
 
@@ -81,8 +83,8 @@ def main() -> None:
     a = ap.parse_args()
     a.data.mkdir(parents=True, exist_ok=True)
     head = (
-        f"{'sequence':18s} {'method':11s} {'wrong':>9s} {'recall':>7s} {'false':>6s} "
-        f"{'rec.off':>7s} {'ms off':>7s} {'ms on':>7s} {'ratio':>6s}  statuses"
+        f"{'sequence':18s} {'method':11s} {'wrong':>9s} {'recall':>7s} {'gross':>11s} "
+        f"{'false':>6s} {'rec.off':>7s} {'ms off':>7s} {'ms on':>7s} {'ratio':>6s}  statuses"
     )
     print(f"step_check={a.mode}, {a.frames} frames; wrong = >{WRONG_M} m or >{WRONG_DEG}°")
     print(head)
@@ -99,13 +101,16 @@ def main() -> None:
             flag_off = np.array([s.status != "ok" for s in off.steps[1:]])
             wrong_off = _wrong(seq, off.steps)
             rec = 100.0 * (flag & wrong).sum() / max(wrong.sum(), 1)
+            gross = _wrong(seq, on.steps, 2.0)
+            rec_g = 100.0 * (flag & gross).sum() / max(gross.sum(), 1)
             fal = 100.0 * (flag & ~wrong).sum() / max((~wrong).sum(), 1)
             rec_off = 100.0 * (flag_off & wrong_off).sum() / max(wrong_off.sum(), 1)
             st = Counter(s.status for s in on.steps[1:])
             tag = "*" if name in TUNED else " "
             print(
                 f"{name + tag:18s} {method:11s} {wrong.sum():4d}/{len(wrong):<4d} "
-                f"{rec:6.1f}% {fal:5.1f}% {rec_off:6.1f}% {off.median_time_ms:7.2f} "
+                f"{rec:6.1f}% {rec_g:5.1f}%/{gross.sum():<4d} {fal:5.1f}% {rec_off:6.1f}% "
+                f"{off.median_time_ms:7.2f} "
                 f"{on.median_time_ms:7.2f} {on.median_time_ms / off.median_time_ms:5.1f}x  "
                 + ", ".join(f"{k} {v}" for k, v in sorted(st.items())),
                 flush=True,
