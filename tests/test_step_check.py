@@ -139,6 +139,7 @@ def test_run_counts_flagged_steps_and_diagnostics_give_the_reason(rng, tmp_path)
     seq = [Scan(c, time=float(i)) for i, c in enumerate(clouds)]
     run = run_sequence(seq, _Fixed(wrong), initial_pose=None, step_check="referee", out=tmp_path)
     assert run.n_flagged == 3
+    assert run.options["step_check"] == "referee"
     assert run.flagged.tolist() == [False, True, True, True]
     rows = run.diagnostics()
     assert [r["status"] for r in rows] == ["first", "flagged", "flagged", "flagged"]

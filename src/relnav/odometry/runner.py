@@ -375,6 +375,7 @@ def run_sequence(
             "motion_prior": motion_prior,
             "initial_pose": init_source,
             "method_options": method_options,
+            "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
         },
         used_prior=used_prior,
         flagged=flagged,

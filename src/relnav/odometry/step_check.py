@@ -110,9 +110,10 @@ def resolve_step_check(mode: Any, method: Any, options: dict[str, Any] | None = 
 
 @dataclass
 class _Referee:
-    """Per-scan data of the referee (a point-to-plane prepared cloud)."""
+    """Per-scan data of the referee (a point-to-plane prepared cloud) and its cost (s)."""
 
     cloud: Any
+    time_s: float = 0.0
 
 
 class StepChecker:
@@ -171,12 +172,13 @@ class StepChecker:
         or the referee is not used."""
         if not self.uses_referee:
             return None
+        t0 = time.perf_counter()
         try:
             cloud = self.referee.prepare(points)
         except Exception as e:  # a bad scan is judged by the method, not here
             log.debug("step check: referee preparation failed: %s", e)
             return None
-        return _Referee(cloud) if cloud.ok else None
+        return _Referee(cloud, time.perf_counter() - t0) if cloud.ok else None
 
     def judge(
         self,
@@ -190,8 +192,8 @@ class StepChecker:
         target_referee: _Referee | None = None,
     ) -> None:
         """Check an ``ok`` result (in place): status ``flagged`` with the reason in
-        ``message``; the figures go to ``result.info["step_check"]`` and the time to
-        ``result.timings["check"]`` (s).
+        ``message``; the figures go to ``result.info["step_check"]`` and the time (this call
+        and the current scan's :meth:`prepare`) to ``result.timings["check"]`` (s).
 
         ``source`` is the current scan, ``target`` the previous one (sensor frames, m);
         ``*_prepared`` are the method's per-scan data (:class:`PreparedRegistration`).
@@ -233,7 +235,7 @@ class StepChecker:
                     )
             else:
                 reasons.append(f"backward registration {back.status} ({back.message})")
-        dt = time.perf_counter() - t0
+        dt = time.perf_counter() - t0 + (source_referee.time_s if source_referee else 0.0)
         result.timings["check"] = result.timings.get("check", 0.0) + dt
         info["flagged"] = bool(reasons)
         result.info["step_check"] = info
