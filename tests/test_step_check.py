@@ -51,6 +51,7 @@ class _Consistent(_Fixed):
 def test_resolve_modes():
     assert resolve_step_check("auto", "icp-point") == "full"
     assert resolve_step_check("auto", "icp-plane") == "backward"
+    assert resolve_step_check("auto", "sicp-point") == "referee"
     assert resolve_step_check("auto", "feature:hods+gcc+alphabeta") == "referee"
     assert resolve_step_check("auto", "feature:hods+gcc+svd", {"refine": "icp-plane"}) == "backward"
     assert resolve_step_check("auto", "kiss-icp") == "off"
