@@ -53,12 +53,12 @@ log = logging.getLogger(__name__)
 StepCheckMode = Literal["auto", "off", "referee", "backward", "full"]
 STEP_CHECK_MODES: tuple[str, ...] = ("auto", "off", "referee", "backward", "full")
 """``off``: no check; ``referee``: point-to-plane referee only; ``backward``: forward–backward
-only; ``full``: both; ``auto``: both for point-to-point ICP, the referee for Sparse ICP
-point-to-point (its backward run costs a second slow registration and flagged no more on the
-tuning sequences), forward–backward for
-point-to-plane ICP (a point-to-plane referee would repeat the method), the referee for feature
-pipelines (their second registration doubles the time per frame) or forward–backward for those
-refined by ICP (preset ``extended``), ``off`` for other methods."""
+only; ``full``: both. ``auto``: both for point-to-point ICP; the referee for Sparse ICP
+point-to-point (its backward run doubles a slow method and flagged no more on the tuning
+sequences) and for feature pipelines (their second registration doubles the time per frame);
+forward–backward for point-to-plane ICP and for feature pipelines refined by ICP (preset
+``extended``), where a point-to-plane referee would repeat the method; ``off`` for other
+methods."""
 
 CHECKED_FAMILIES: dict[str, str] = {
     "icp-point": "full",
