@@ -8,7 +8,12 @@ and the mode under test (``auto`` by default) — and prints, per run:
 * ``recall``: share of the wrong steps that are not ``ok`` (flagged, degenerate or failed);
 * ``gross``: the same for the steps wrong by more than twice that (1 m or 10°), with their count;
 * ``false``: share of the right steps that are not ``ok``;
-* ``ms off`` / ``ms on`` and their ratio: median wall-clock time per frame.
+* ``ms off`` / ``ms on``: median wall-clock time per frame of the two runs (they run one after
+  the other, so on a shared machine their ratio also measures the load);
+* ``check``: median time of the checks per frame inside the checked run (``timings["check"]``:
+  the referee's scan preparation, the referee and the backward registration) and ``ratio``,
+  the checked run's median frame time over its median frame time without the checks (the
+  cost measured under one load).
 
 Tuned on: sim-bennu and the flash sequence comet-ellipse-64. The others are held out.
 
@@ -84,7 +89,8 @@ def main() -> None:
     a.data.mkdir(parents=True, exist_ok=True)
     head = (
         f"{'sequence':18s} {'method':11s} {'wrong':>9s} {'recall':>7s} {'gross':>11s} "
-        f"{'false':>6s} {'rec.off':>7s} {'ms off':>7s} {'ms on':>7s} {'ratio':>6s}  statuses"
+        f"{'false':>6s} {'rec.off':>7s} {'ms off':>7s} {'ms on':>7s} {'check':>6s} {'ratio':>6s}"
+        "  statuses"
     )
     print(f"step_check={a.mode}, {a.frames} frames; wrong = >{WRONG_M} m or >{WRONG_DEG}°")
     print(head)
@@ -106,13 +112,16 @@ def main() -> None:
             fal = 100.0 * (flag & ~wrong).sum() / max((~wrong).sum(), 1)
             rec_off = 100.0 * (flag_off & wrong_off).sum() / max(wrong_off.sum(), 1)
             st = Counter(s.status for s in on.steps[1:])
+            frame = np.array([s.time_s for s in on.steps[1:]])
+            check = np.array([s.result.timings.get("check", 0.0) for s in on.steps[1:]])
+            t_off = 1000.0 * float(np.median([s.time_s for s in off.steps[1:]]))
+            ratio = float(np.median(frame) / max(np.median(frame - check), 1e-12))
             tag = "*" if name in TUNED else " "
             print(
                 f"{name + tag:18s} {method:11s} {wrong.sum():4d}/{len(wrong):<4d} "
                 f"{rec:6.1f}% {rec_g:5.1f}%/{gross.sum():<4d} {fal:5.1f}% {rec_off:6.1f}% "
-                f"{off.median_time_ms:7.2f} "
-                f"{on.median_time_ms:7.2f} {on.median_time_ms / off.median_time_ms:5.1f}x  "
-                + ", ".join(f"{k} {v}" for k, v in sorted(st.items())),
+                f"{t_off:7.2f} {1000.0 * np.median(frame):7.2f} {1000.0 * np.median(check):6.2f} "
+                f"{ratio:5.2f}x  " + ", ".join(f"{k} {v}" for k, v in sorted(st.items())),
                 flush=True,
             )
     print("* tuning sequence", file=sys.stderr)
