@@ -190,7 +190,8 @@ def odometry(
         "-O",
         help="Method option key=value (repeatable; dots nest: estimator_options.alpha=0.3). "
         "Odometry options: motion_prior, initial_pose (gt | identity | 16 numbers), "
-        "gate_rotation_deg, gate_translation.",
+        "gate_rotation_deg, gate_translation, step_check (auto | off | referee | backward | "
+        "full), step_tolerance_m, step_tolerance_deg.",
     ),
     strict: bool = typer.Option(
         False, "--strict", help="Abort on an unreadable scan (default: flag the frame, go on)."
@@ -318,7 +319,7 @@ def odometry(
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("frames", str(len(run.poses)))
-    table.add_row("flagged (kept the motion prior)", str(run.n_flagged))
+    table.add_row("flagged (not ok)", str(run.n_flagged))
     table.add_row("median time per frame (ms)", f"{run.median_time_ms:.1f}")
     for key in ("e_T_avg", "e_T_max", "drift", "T_error_pct", "e_R_avg", "e_R_max", "e_RT"):
         if key in m:

@@ -12,6 +12,11 @@ translated farther than the two scans reach (they could not overlap), a scan wit
 beyond :data:`relnav.io.pointclouds.ABSURD_COORDINATE` (misread bytes) or an unreadable scan
 (:meth:`Odometry.skip_frame`); after such a scan the next one is registered onto the last
 usable scan.
+
+An ``ok`` step of a pairwise method is then re-examined without ground truth
+(:mod:`relnav.odometry.step_check`: a point-to-plane referee started at the step and a
+forward–backward registration); a step they disagree with is ``flagged`` — kept in the chain,
+not trusted.
 """
 
 from __future__ import annotations
@@ -53,7 +58,8 @@ class OdometryStep:
     used_prior : bool
         True when the step is the motion prior because the registration was not ``ok``.
     status : str
-        ``"first"``, ``"ok"``, ``"degenerate"`` or ``"failed"``.
+        ``"first"``, ``"ok"``, ``"flagged"`` (registered, kept, but not trusted: see
+        :mod:`relnav.odometry.step_check`), ``"degenerate"`` or ``"failed"``.
     n_points : int
         Points in the scan.
     time_s : float
@@ -88,6 +94,14 @@ class Odometry:
         rejected (status ``failed``) and the prior is used instead. It protects the chain from
         the occasional wrong registration of a smooth trajectory; it also rejects genuine
         manoeuvres larger than the gate.
+    step_check : {"auto", "off", "referee", "backward", "full"} or bool
+        Re-examine every ``ok`` step without ground truth and flag the doubtful ones
+        (:mod:`relnav.odometry.step_check`; ``auto``: forward–backward and a point-to-plane
+        referee for point-to-point ICP, forward–backward for point-to-plane ICP and for feature
+        pipelines refined by ICP, the referee for other feature pipelines, off for other
+        methods and for registration objects).
+    step_tolerance_m, step_tolerance_deg : float
+        Accuracy a step must have to stay ``ok`` (m, degrees; default 0.5 m, 5°).
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -100,9 +114,13 @@ class Odometry:
         motion_prior: MotionPrior = "constant_velocity",
         gate_rotation_deg: float | None = None,
         gate_translation: float | None = None,
+        step_check: str | bool = "auto",
+        step_tolerance_m: float = 0.5,
+        step_tolerance_deg: float = 5.0,
         **method_options: Any,
     ) -> None:
         from relnav.odometry.options import check_odometry_options, parse_initial_pose
+        from relnav.odometry.step_check import StepChecker, resolve_step_check
 
         opts = check_odometry_options(
             {
@@ -117,6 +135,17 @@ class Odometry:
         self.registration = (
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
+        check = resolve_step_check(step_check, method, method_options)
+        self.step_checker: StepChecker | None = (
+            None
+            if check == "off"
+            else StepChecker(
+                self.registration,
+                check,  # type: ignore[arg-type]
+                tolerance_m=_number("step_tolerance_m", step_tolerance_m),
+                tolerance_deg=_number("step_tolerance_deg", step_tolerance_deg),
+            )
+        )
         self.motion_prior: MotionPrior = opts.motion_prior
         g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
         self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
@@ -125,6 +154,7 @@ class Odometry:
         self.last_step = np.eye(4)
         self._prev_points: np.ndarray | None = None
         self._prev_prepared: Any = None
+        self._prev_referee: Any = None
         self._prev_reach = 0.0
         self._anchor_pose = self.pose.copy()
         self._gap = 0
@@ -163,6 +193,9 @@ class Odometry:
             except Exception as e:  # a bad scan must not stop the run
                 log.warning("frame %d: preparation failed: %s", self.n_frames, e)
                 prepare_error = f"{type(e).__name__}: {e}"
+        referee = None
+        if self.step_checker is not None and not prepare_error:
+            referee = self.step_checker.prepare(points)
         if self.n_frames == 0:
             out = OdometryStep(
                 self.pose.copy(),
@@ -184,7 +217,17 @@ class Odometry:
                 self._check_plausible(result, reach)
             if result.status == "ok":
                 self._apply_gate(result, prior)
-            used_prior = result.status != "ok"
+            if result.status == "ok" and self.step_checker is not None:
+                self.step_checker.judge(
+                    result,
+                    source=points,
+                    target=self._prev_points,  # type: ignore[arg-type]
+                    source_prepared=prepared,
+                    target_prepared=self._prev_prepared,
+                    source_referee=referee,
+                    target_referee=self._prev_referee,
+                )
+            used_prior = result.status not in ("ok", "flagged")
             if used_prior:
                 step = self.prior_step
                 log.info(
@@ -214,6 +257,7 @@ class Odometry:
             )
         self._prev_points = points
         self._prev_prepared = prepared
+        self._prev_referee = referee
         self._prev_reach = reach
         self._anchor_pose = self.pose.copy()
         self._gap = 0
@@ -301,6 +345,17 @@ class Odometry:
         except Exception as e:  # never let one frame stop the run; flag it
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
+
+def _number(name: str, value: Any) -> float:
+    """A positive finite number, or :class:`ConfigError` naming the option."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a positive number, got {value!r}") from None
+    if isinstance(value, bool) or not (np.isfinite(v) and v > 0):
+        raise ConfigError(f"{name} must be a positive number, got {value!r}")
+    return v
 
 
 def _reach(points: np.ndarray) -> float:

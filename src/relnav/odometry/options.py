@@ -23,7 +23,15 @@ __all__ = [
     "parse_initial_pose",
 ]
 
-ODOMETRY_KEYS = ("motion_prior", "gate_rotation_deg", "gate_translation", "initial_pose")
+ODOMETRY_KEYS = (
+    "motion_prior",
+    "gate_rotation_deg",
+    "gate_translation",
+    "initial_pose",
+    "step_check",
+    "step_tolerance_m",
+    "step_tolerance_deg",
+)
 """Options handled by the odometry itself rather than by the registration method."""
 
 

@@ -54,6 +54,9 @@ class OdometryRun:
         The options the run used (method options, motion prior, initial pose source).
     used_prior : (N,) bool
         Frames that kept the motion prior.
+    flagged : (N,) bool
+        Frames whose status is neither ``first`` nor ``ok`` (``flagged`` steps are kept in the
+        chain but not trusted; ``degenerate``/``failed`` ones kept the motion prior).
     frame_time_s : (N,) float64
         Wall-clock seconds per frame.
     paths : dict[str, Path]
@@ -66,15 +69,18 @@ class OdometryRun:
     steps: list[OdometryStep] = field(repr=False, default_factory=list)
     options: dict[str, Any] = field(default_factory=dict)
     used_prior: np.ndarray | None = field(repr=False, default=None)
+    flagged: np.ndarray | None = field(repr=False, default=None)
     frame_time_s: np.ndarray | None = field(repr=False, default=None)
     paths: dict[str, Path] = field(default_factory=dict)
 
     @property
     def n_flagged(self) -> int:
-        """Frames whose registration was not ``ok`` (they kept the motion prior)."""
-        if self.used_prior is not None:
-            return int(np.count_nonzero(self.used_prior))
-        return sum(s.used_prior for s in self.steps)
+        """Frames whose registration was not ``ok`` (flagged, or kept the motion prior)."""
+        if self.flagged is not None:
+            return int(np.count_nonzero(self.flagged))
+        if self.steps:
+            return sum(s.status not in ("ok", "first") for s in self.steps)
+        return int(np.count_nonzero(self.used_prior)) if self.used_prior is not None else 0
 
     def _times(self) -> list[float]:
         if self.frame_time_s is not None:
@@ -290,8 +296,8 @@ def run_sequence(
         An unreadable scan (:class:`relnav.errors.InputError`) aborts the run. By default the
         frame is flagged ``failed`` with the reason and the run goes on.
     **method_options
-        Passed to the registration factory; ``gate_rotation_deg``/``gate_translation`` go to
-        :class:`Odometry`.
+        Passed to the registration factory; ``gate_rotation_deg``/``gate_translation`` and
+        ``step_check``/``step_tolerance_m``/``step_tolerance_deg`` go to :class:`Odometry`.
 
     Returns
     -------
@@ -314,6 +320,7 @@ def run_sequence(
     times = np.zeros(n)
     poses = np.zeros((n, 4, 4))
     used_prior = np.zeros(n, dtype=bool)
+    flagged = np.zeros(n, dtype=bool)
     frame_time = np.zeros(n)
     writer = _RunWriter(out) if out is not None else None
     try:
@@ -332,6 +339,7 @@ def run_sequence(
                     step = odo.register_frame(scan)
                 poses[i] = step.pose
                 used_prior[i] = step.used_prior
+                flagged[i] = step.status not in ("ok", "first")
                 frame_time[i] = step.time_s
                 if keep_steps:
                     steps.append(step)
@@ -367,13 +375,20 @@ def run_sequence(
             "motion_prior": motion_prior,
             "initial_pose": init_source,
             "method_options": method_options,
+            "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
         },
         used_prior=used_prior,
+        flagged=flagged,
         frame_time_s=frame_time,
         paths=paths,
     )
     if run.n_flagged:
-        log.info("%d of %d frames kept the motion prior", run.n_flagged, n)
+        log.info(
+            "%d of %d frames flagged (%d kept the motion prior)",
+            run.n_flagged,
+            n,
+            int(np.count_nonzero(used_prior)),
+        )
     return run
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 __all__ = ["RegistrationResult", "RegistrationStatus"]
 
-RegistrationStatus = Literal["ok", "degenerate", "failed"]
+RegistrationStatus = Literal["ok", "flagged", "degenerate", "failed"]
 
 
 @dataclass
@@ -32,7 +32,9 @@ class RegistrationResult:
         Correspondences used for the final estimate.
     converged : bool
         The method's own convergence flag.
-    status : {"ok", "degenerate", "failed"}
+    status : {"ok", "flagged", "degenerate", "failed"}
+        ``flagged``: an estimate was produced but a check found it doubtful (set by
+        :mod:`relnav.odometry.step_check`; methods themselves do not return it);
         ``degenerate``: geometry or correspondences cannot fix 6 DoF (too few, collinear,
         coplanar); ``failed``: the method ran but produced no usable estimate (or raised).
     timings : dict[str, float]
