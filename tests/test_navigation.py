@@ -347,3 +347,34 @@ def test_normal_information_drops_the_in_plane_pull(rng):
     assert np.allclose(H[np.ix_(free, free)], 0.0, atol=1e-6)
     fixed = [2, 3, 4]
     assert np.all(np.linalg.eigvalsh(H[np.ix_(fixed, fixed)]) > 1e3)
+
+
+def test_drift_covariance_maps_the_step_to_the_observation(rng):
+    """A step error is a body twist of ``T_target_sensor``; the observation is the target's
+    position in the sensor frame and its attitude in target axes."""
+    from relnav.geometry.rotations import random_rotation
+    from relnav.navigation.state import StateRecord, drift_covariance
+
+    T = np.eye(4)
+    T[:3, :3] = random_rotation(rng)
+    T[:3, 3] = rng.normal(0, 30, 3)
+    A = rng.normal(size=(6, 6))
+    C = A @ A.T
+    Ct, Cr = np.zeros((6, 6)), np.zeros((6, 6))
+    Ct[:3, :3], Cr[3:, 3:] = C[:3, :3], C[3:, 3:]
+    # a body translation of the sensor moves the target by the same vector in the sensor frame
+    Dt = drift_covariance(Ct, T)
+    np.testing.assert_allclose(Dt[:3, :3], C[:3, :3], atol=1e-9)
+    np.testing.assert_allclose(Dt[3:, :], 0.0, atol=1e-9)
+    # a body rotation φ of the sensor is R_ts φ in target axes (and swings the target by the
+    # lever arm in the sensor frame)
+    R = T[:3, :3]
+    Dr = drift_covariance(Cr, T)
+    np.testing.assert_allclose(Dr[3:, 3:], R @ C[3:, 3:] @ R.T, atol=1e-9)
+    assert np.allclose(drift_covariance(C, T), drift_covariance(C, T).T)
+    # the navigator's steps carry their covariance into the compact records
+    from types import SimpleNamespace
+
+    res = SimpleNamespace(info={"information": np.eye(6), "step_covariance": C})
+    rec = StateRecord.from_step(SimpleNamespace(status="ok", pose=T, result=res))
+    np.testing.assert_array_equal(rec.step_covariance, C)

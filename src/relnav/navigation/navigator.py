@@ -385,7 +385,7 @@ class Navigator:
         c = self.config
         s_t = math.sqrt(max(float(np.linalg.eigvalsh(C[:3, :3])[-1]), 0.0))
         s_r = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(C[3:, 3:])[-1]), 0.0)))
-        result.info.update(step_sigma_t=s_t, step_sigma_r_deg=s_r)
+        result.info.update(step_sigma_t=s_t, step_sigma_r_deg=s_r, step_covariance=C.copy())
         if result.status != "ok":
             return
         pl_t, pl_r = c.protection_k * s_t, c.protection_k * s_r

@@ -25,10 +25,11 @@ import numpy as np
 
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import matrix_to_quat
-from relnav.geometry.se3 import invert
+from relnav.geometry.se3 import adjoint, invert
 
 __all__ = [
     "StateRecord",
+    "drift_covariance",
     "measurement_covariance",
     "nees_band",
     "pose_noise",
@@ -36,6 +37,28 @@ __all__ = [
 ]
 
 _UNSEEN_VAR = 1e6  # variance (m², rad²) given to directions the scan did not constrain
+
+
+def _observation_jacobian(T_target_sensor: np.ndarray) -> np.ndarray:
+    """Left twist of ``T_target_sensor`` → ``[δp (sensor frame), δθ (target axes)]``."""
+    J = np.zeros((6, 6))
+    J[:3, :3] = invert(T_target_sensor)[:3, :3]
+    J[3:, 3:] = np.eye(3)
+    return J
+
+
+def drift_covariance(C_step_body: np.ndarray, T_target_sensor: np.ndarray) -> np.ndarray:
+    """A step's covariance (body frame of ``T_target_sensor``) in the observation's coordinates.
+
+    **[interpretation]** The navigator's pose error relative to the truth is its map's error,
+    which moves by at most one step's error per frame: paper 2's observer-bias state
+    (``TwistorUKF(observer_bias=True)``) takes it as the growth of a slowly varying bias, so that
+    the UKF does not read the navigator's drift as target motion.
+    """
+    Ad = adjoint(T_target_sensor)
+    J = _observation_jacobian(T_target_sensor)
+    C = J @ Ad @ np.asarray(C_step_body) @ Ad.T @ J.T
+    return 0.5 * (C + C.T)
 
 
 def measurement_covariance(H_left: np.ndarray, T_target_sensor: np.ndarray) -> np.ndarray:
@@ -52,10 +75,7 @@ def measurement_covariance(H_left: np.ndarray, T_target_sensor: np.ndarray) -> n
     top = max(float(w[-1]), 1e-300)
     inv_w = np.where(w > 1e-9 * top, 1.0 / np.maximum(w, 1e-300), _UNSEEN_VAR)
     C = (V * inv_w) @ V.T
-    R_st = invert(T_target_sensor)[:3, :3]
-    J = np.zeros((6, 6))
-    J[:3, :3] = R_st
-    J[3:, 3:] = np.eye(3)
+    J = _observation_jacobian(T_target_sensor)
     C = J @ C @ J.T
     return 0.5 * (C + C.T)
 
@@ -72,17 +92,25 @@ class StateRecord:
         Online ``T_target_sensor``.
     information : (6, 6) float64 or None
         The scan's own information about the pose (left twist, target frame).
+    step_covariance : (6, 6) float64 or None
+        Covariance of the step that led to this pose (body frame, right twist ``[ρ, φ]``).
     """
 
     status: str
     pose: np.ndarray
     information: np.ndarray | None = None
+    step_covariance: np.ndarray | None = None
 
     @classmethod
     def from_step(cls, step: Any) -> StateRecord:
         """From an :class:`relnav.odometry.OdometryStep` of the navigator."""
-        H = None if step.result is None else step.result.info.get("information")
-        return cls(str(step.status), np.array(step.pose, dtype=float), H)
+        info = {} if step.result is None else step.result.info
+        return cls(
+            str(step.status),
+            np.array(step.pose, dtype=float),
+            info.get("information"),
+            info.get("step_covariance"),
+        )
 
 
 def relative_state(
@@ -110,7 +138,9 @@ def relative_state(
     filter : {"ukf", "ekf"}
         Paper 2's twistor UKF (default) or the quaternion EKF.
     **tracker_options
-        Passed to :class:`relnav.fusion.tracker.Tracker` (``q``, ``p0``, ``omega0`` …).
+        Passed to :class:`relnav.fusion.tracker.Tracker` (``q``, ``p0``, ``omega0`` …). With the
+        UKF, ``observer_bias`` defaults to True: each step's covariance
+        (:func:`drift_covariance`) feeds the bias state.
 
     Returns
     -------
@@ -131,7 +161,12 @@ def relative_state(
         R = None if H is None else measurement_covariance(np.asarray(H), step.pose)
         if R is not None:
             R = R + np.diag([noise[0] ** 2] * 3 + [noise[1] ** 2] * 3)
-        observations.append(Observation(T_st[:3, 3], matrix_to_quat(T_st[:3, :3]), R=R))
+        drift = None
+        if step.step_covariance is not None:
+            drift = drift_covariance(step.step_covariance, step.pose)
+        observations.append(
+            Observation(T_st[:3, 3], matrix_to_quat(T_st[:3, :3]), R=R, drift=drift)
+        )
     truth = None
     if gt_poses is not None:
         T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(frames)]])
@@ -149,6 +184,10 @@ def relative_state(
             "attitude": nr,
             "omega": nr / dt,
         }
+    if filter == "ukf":
+        # the navigator's slowly varying map drift is a bias of its observations, not target
+        # motion: paper 2's observer-bias state absorbs it (see drift_covariance)
+        tracker_options.setdefault("observer_bias", True)
     tracker = Tracker(filter, n_mean_motion=n_mean_motion, **tracker_options)
     return tracker.run(run.timestamps, observations, truth=truth, meta={"method": run.method})
 

@@ -142,6 +142,9 @@ def diagnostic_row(i: int, t: float, s: OdometryStep) -> dict[str, Any]:
     extra = sorted(set(timings) - set(DIAGNOSTIC_STAGES))
     row["t_other_ms"] = 1000.0 * sum(timings[k] for k in extra)
     row["t_frame_ms"] = 1000.0 * s.time_s
+    info = r.info if r else {}
+    row["step_sigma_t_m"] = info.get("step_sigma_t", "")
+    row["step_sigma_r_deg"] = info.get("step_sigma_r_deg", "")
     row["message"] = r.message if r else ""
     return row
 
@@ -159,6 +162,8 @@ DIAGNOSTIC_COLUMNS = (
     *(f"t_{stage}_ms" for stage in DIAGNOSTIC_STAGES),
     "t_other_ms",
     "t_frame_ms",
+    "step_sigma_t_m",
+    "step_sigma_r_deg",
     "message",
 )
 """Columns of ``diagnostics.csv``, in order."""
