@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any
 
@@ -20,37 +19,24 @@ from relnav.bench.report.aggregation import (
     Aggregate,
 )
 
-log = logging.getLogger(__name__)
-
 
 def _variant_of(ctx: _Ctx, tab: str, scn: str, d: str, f: str) -> Aggregate | None:
     """The ablation variant of combination (descriptor ``d``, filter ``f``) for Table ``tab``:
     "3" the same GCC correspondences with ICP, "5" RANSAC instead of GCC, "6" CLGV."""
-    if tab == "3":
-        return _variant(
-            ctx,
-            scn,
-            lambda i: (
-                i.family == "feature"
-                and i.default
-                and i.descriptor == d
-                and i.grouper == "gcc"
-                and i.estimator == "icp"
-            ),
-        )
-    if tab == "5":
-        return _variant(
-            ctx,
-            scn,
-            lambda i: (
-                i.family == "feature"
-                and i.default
-                and i.descriptor == d
-                and i.grouper == "ransac"
-                and i.estimator == f
-            ),
-        )
-    return _variant(ctx, scn, lambda i: i.family == "clgv" and i.default and i.descriptor == d)
+    if tab == "6":
+        return _variant(ctx, scn, lambda i: i.family == "clgv" and i.default and i.descriptor == d)
+    grouper, estimator = ("gcc", "icp") if tab == "3" else ("ransac", f)
+    return _variant(
+        ctx,
+        scn,
+        lambda i: (
+            i.family == "feature"
+            and i.default
+            and i.descriptor == d
+            and i.grouper == grouper
+            and i.estimator == estimator
+        ),
+    )
 
 
 def _ablation_pair(ctx: _Ctx, scn: str, other: Any) -> tuple[Aggregate, Aggregate] | None:

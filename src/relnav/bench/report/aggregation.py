@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import json
-import logging
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
-log = logging.getLogger(__name__)
-
 
 APPENDIX_COLUMNS: tuple[tuple[str, str], ...] = (
     ("drift", "drift (m)"),

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import logging
 import math
 from typing import Any
 
@@ -24,8 +23,6 @@ from relnav.bench.report._common import (
 from relnav.bench.report.aggregation import (
     classify_method,
 )
-
-log = logging.getLogger(__name__)
 
 
 def _section_summary(ctx: _Ctx) -> None:

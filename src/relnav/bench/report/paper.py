@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any
 
@@ -23,8 +22,6 @@ from relnav.bench.report.aggregation import (
     _ICP_FAST,
     classify_method,
 )
-
-log = logging.getLogger(__name__)
 
 
 def _verdict(k: int, n: int) -> str:

@@ -7,16 +7,14 @@ dictionaries (the report prepares them), so they can be reused on any result set
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from relnav.errors import InputError
+from relnav.eval.plots import new_figure, save_png
 
 __all__ = [
     "plot_axis_errors",
@@ -26,8 +24,6 @@ __all__ = [
     "plot_time_vs_points",
     "plot_trajectory_panels",
 ]
-
-log = logging.getLogger(__name__)
 
 _MARKERS = ["o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h"]
 # 20 distinguishable colours: the dark then the light half of matplotlib's tab20
@@ -93,22 +89,6 @@ def _same_as(series: Mapping[str, np.ndarray]) -> dict[str, str]:
 _GT = {"color": "black", "linestyle": "--", "linewidth": 1.6, "label": "ground truth"}
 
 
-def _figure(w: float, h: float) -> Figure:
-    fig = Figure(figsize=(w, h), layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
-    out = Path(path)
-    if out.suffix.lower() != ".png":
-        raise InputError(f"{out}: figures are written as PNG; use a .png file name")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi)
-    log.debug("wrote %s", out)
-    return out
-
-
 def _limits(xy: np.ndarray, margin: float = 0.35) -> tuple[tuple[float, float], ...]:
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     span = max(float((hi - lo).max()), 1e-6)
@@ -150,7 +130,7 @@ def plot_trajectory_panels(
     if not groups:
         raise InputError("plot_trajectory_panels: no groups to plot")
     n = len(groups)
-    fig = _figure(12.0, 4.6 * n)
+    fig = new_figure(12.0, 4.6 * n)
     axes = np.atleast_2d(fig.subplots(n, 2))
     (xl, yl, zl) = _limits(gt)
     for row, (gtitle, est) in enumerate(groups):
@@ -199,7 +179,7 @@ def plot_trajectory_panels(
             )
     if title:
         fig.suptitle(title)
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")
 
 
 def plot_axis_errors(
@@ -228,7 +208,7 @@ def plot_axis_errors(
     if not errors:
         raise InputError("plot_axis_errors: nothing to plot")
     x = np.asarray(frames)
-    fig = _figure(10.0, 8.5)
+    fig = new_figure(10.0, 8.5)
     axes = fig.subplots(4, 1, sharex=True)
     labels = ["Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
     same = _same_as({k: np.column_stack([v[0], v[1]]) for k, v in errors.items()})
@@ -255,7 +235,7 @@ def plot_axis_errors(
         fontsize="small",
     )
     fig.suptitle(title or "Error with respect to the ground truth (GT − estimate)")
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")
 
 
 def plot_normalised_ert_vs_time(
@@ -283,7 +263,7 @@ def plot_normalised_ert_vs_time(
         raise InputError("plot_normalised_ert_vs_time: no finite positive points")
     scen = list(dict.fromkeys(p[0] for p in pts))
     desc = list(dict.fromkeys(p[1] for p in pts))
-    fig = _figure(9.5, 6.0)
+    fig = new_figure(9.5, 6.0)
     ax = fig.subplots()
     colors = [_TAB20[i % len(_TAB20)] for i in range(len(scen))]
     for s, d, t, v in pts:
@@ -314,7 +294,7 @@ def plot_normalised_ert_vs_time(
     fig.legend(handles=h1, title="scenario", fontsize="small", loc="outside right upper")
     fig.legend(handles=h2, title="descriptor", fontsize="small", loc="outside right lower")
     ax.set_title(title or "Normalised e^RT (mean over filters) vs processing time")
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")
 
 
 def plot_time_vs_points(
@@ -333,7 +313,7 @@ def plot_time_vs_points(
     """
     if not series:
         raise InputError("plot_time_vs_points: nothing to plot")
-    fig = _figure(9.5, 6.0)
+    fig = new_figure(9.5, 6.0)
     ax = fig.subplots()
     scen_x: dict[str, float] = {}
     for i, (name, pts) in enumerate(series.items()):
@@ -367,7 +347,7 @@ def plot_time_vs_points(
     ax.grid(True, which="both", alpha=0.25)
     fig.legend(*ax.get_legend_handles_labels(), fontsize="small", loc="outside right center")
     ax.set_title(title or "Processing time vs scan cardinality")
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")
 
 
 def plot_filter_scores(
@@ -389,7 +369,7 @@ def plot_filter_scores(
     names = list(dict.fromkeys(k for v in scores.values() for k in v))
     if not scen or not names:
         raise InputError("plot_filter_scores: nothing to plot")
-    fig = _figure(max(7.0, 1.3 * len(scen) + 3.0), 5.2)
+    fig = new_figure(max(7.0, 1.3 * len(scen) + 3.0), 5.2)
     ax = fig.subplots()
     w = 0.8 / len(names)
     x = np.arange(len(scen))
@@ -417,7 +397,7 @@ def plot_filter_scores(
         loc="outside right center",
     )
     ax.set_title(title or "Normalised e^RT per filter (mean over descriptors)")
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")
 
 
 def plot_nuisance_curves(
@@ -442,7 +422,7 @@ def plot_nuisance_curves(
     if not scen:
         raise InputError("plot_nuisance_curves: nothing to plot")
     n = len(scen)
-    fig = _figure(5.6 * n + 2.2, 4.6)
+    fig = new_figure(5.6 * n + 2.2, 4.6)
     axes = np.atleast_1d(fig.subplots(1, n, squeeze=False)[0])
     for ax, s in zip(axes, scen, strict=True):
         for i, (m, pts) in enumerate(curves[s].items()):
@@ -471,4 +451,4 @@ def plot_nuisance_curves(
     fig.legend(*axes[-1].get_legend_handles_labels(), fontsize="small", loc="outside right center")
     if title:
         fig.suptitle(title)
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi, what="figures")

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import abc
-import logging
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -19,9 +18,6 @@ from relnav.sim.noise import (
     dropout_mask,
 )
 from relnav.sim.targets import Target
-
-log = logging.getLogger(__name__)
-
 
 # --------------------------------------------------------------------------- helpers
 
@@ -259,6 +255,13 @@ class _RaySensor(Sensor):
     max_incidence_deg: float
     dropout: float
     _dirs: np.ndarray | None
+
+    def _set_gates(self, dropout: Any, max_incidence_deg: Any) -> None:
+        """Check and set the return dropout probability and the incidence limit (≤ 90°)."""
+        self.dropout = _check_prob("dropout", dropout)
+        self.max_incidence_deg = _num("max_incidence_deg", max_incidence_deg, lo=0.0)
+        if self.max_incidence_deg > 90.0:
+            raise ConfigError(f"max_incidence_deg must be <= 90, got {self.max_incidence_deg}")
 
     @property
     def max_range(self) -> float:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any, ClassVar
 
@@ -14,7 +13,6 @@ from relnav.sim.noise import (
 )
 from relnav.sim.sensors.base import (
     _check_fov,
-    _check_prob,
     _check_ranges,
     _int,
     _num,
@@ -22,8 +20,6 @@ from relnav.sim.sensors.base import (
     _RaySensor,
 )
 from relnav.sim.targets import Target
-
-log = logging.getLogger(__name__)
 
 
 class DepthCamera(_RaySensor):
@@ -93,10 +89,7 @@ class DepthCamera(_RaySensor):
             raise ConfigError(f"decimation {self.decimation} leaves no pixels")
         self.sigma_coeff = _num("sigma_coeff", sigma_coeff, lo=0.0)
         self.quantize = bool(quantize)
-        self.dropout = _check_prob("dropout", dropout)
-        self.max_incidence_deg = _num("max_incidence_deg", max_incidence_deg, lo=0.0)
-        if self.max_incidence_deg > 90.0:
-            raise ConfigError(f"max_incidence_deg must be <= 90, got {self.max_incidence_deg}")
+        self._set_gates(dropout, max_incidence_deg)
         self.shadows = bool(shadows)
         self.baseline = _num("baseline", baseline, lo=0.0)
         self._dirs = None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 from typing import Any, ClassVar
 
 import numpy as np
@@ -10,7 +9,6 @@ import numpy as np
 from relnav.errors import ConfigError
 from relnav.sim.sensors.base import (
     _check_fov,
-    _check_prob,
     _check_ranges,
     _equiangular_dirs,
     _int,
@@ -18,8 +16,6 @@ from relnav.sim.sensors.base import (
     _pinhole_dirs,
     _RaySensor,
 )
-
-log = logging.getLogger(__name__)
 
 
 class FlashLidar(_RaySensor):
@@ -73,10 +69,7 @@ class FlashLidar(_RaySensor):
         self.fov_v_deg = _check_fov("fov_v_deg", fov_v_deg)
         self.min_range, self.max_range_m = _check_ranges(min_range, max_range)
         self.range_sigma = _num("range_sigma", range_sigma, lo=0.0)
-        self.dropout = _check_prob("dropout", dropout)
-        self.max_incidence_deg = _num("max_incidence_deg", max_incidence_deg, lo=0.0)
-        if self.max_incidence_deg > 90.0:
-            raise ConfigError(f"max_incidence_deg must be <= 90, got {self.max_incidence_deg}")
+        self._set_gates(dropout, max_incidence_deg)
         if projection not in ("pinhole", "equiangular"):
             raise ConfigError(f"projection must be 'pinhole' or 'equiangular', got {projection!r}")
         self.projection = projection

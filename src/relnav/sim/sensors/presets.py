@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
@@ -15,9 +14,6 @@ from relnav.sim.sensors.depth_camera import DepthCamera
 from relnav.sim.sensors.flash import FlashLidar
 from relnav.sim.sensors.rotating import ScanningLidar
 from relnav.sim.sensors.surface import SurfaceSampler
-
-log = logging.getLogger(__name__)
-
 
 # --------------------------------------------------------------------------- presets
 
@@ -40,65 +36,47 @@ _RS32_ELEVATIONS = (
     15.0,
 )
 
+
+def _spinning(
+    elevations_deg: tuple[float, ...],
+    azimuth_step_deg: float,
+    min_range: float,
+    max_range: float,
+    range_sigma: float,
+) -> dict[str, Any]:
+    """Parameters of a 360° scanning LIDAR preset (degrees, metres)."""
+    return dict(
+        elevations_deg=elevations_deg,
+        azimuth_step_deg=azimuth_step_deg,
+        azimuth_fov_deg=(-180.0, 180.0),
+        min_range=min_range,
+        max_range=max_range,
+        range_sigma=range_sigma,
+    )
+
+
+_FLASH_128 = dict(rows=128, cols=128, fov_h_deg=45.0, fov_v_deg=45.0, min_range=1.0)
+"""The 128×128, 45°×45° focal plane shared by the GoldenEye and DragonEye presets."""
+
 _PRESETS: dict[str, tuple[type[Sensor], dict[str, Any]]] = {
     "vlp16": (
         ScanningLidar,
-        dict(
-            elevations_deg=tuple(float(e) for e in range(-15, 16, 2)),
-            azimuth_step_deg=0.2,
-            azimuth_fov_deg=(-180.0, 180.0),
-            min_range=0.5,
-            max_range=100.0,
-            range_sigma=0.03,
-        ),
+        _spinning(tuple(float(e) for e in range(-15, 16, 2)), 0.2, 0.5, 100.0, 0.03),
     ),
+    # [interpretation] 64 beams evenly spaced +2..-24.9° (≈0.427°)
     "hdl64": (
         ScanningLidar,
-        dict(
-            # [interpretation] 64 beams evenly spaced +2..-24.9° (≈0.427°)
-            elevations_deg=tuple(float(e) for e in np.round(np.linspace(2.0, -24.9, 64), 6)),
-            azimuth_step_deg=0.1728,
-            azimuth_fov_deg=(-180.0, 180.0),
-            min_range=0.9,
-            max_range=120.0,
-            range_sigma=0.01,
+        _spinning(
+            tuple(float(e) for e in np.round(np.linspace(2.0, -24.9, 64), 6)),
+            0.1728,
+            0.9,
+            120.0,
+            0.01,
         ),
     ),
-    "rs32": (
-        ScanningLidar,
-        dict(
-            elevations_deg=_RS32_ELEVATIONS,
-            azimuth_step_deg=0.2,
-            azimuth_fov_deg=(-180.0, 180.0),
-            min_range=0.4,
-            max_range=200.0,
-            range_sigma=0.03,
-        ),
-    ),
-    "goldeneye": (
-        FlashLidar,
-        dict(
-            rows=128,
-            cols=128,
-            fov_h_deg=45.0,
-            fov_v_deg=45.0,
-            min_range=1.0,
-            max_range=3000.0,
-            range_sigma=0.10,
-        ),
-    ),
-    "dragoneye": (
-        FlashLidar,
-        dict(
-            rows=128,
-            cols=128,
-            fov_h_deg=45.0,
-            fov_v_deg=45.0,
-            min_range=1.0,
-            max_range=1500.0,
-            range_sigma=0.15,
-        ),
-    ),
+    "rs32": (ScanningLidar, _spinning(_RS32_ELEVATIONS, 0.2, 0.4, 200.0, 0.03)),
+    "goldeneye": (FlashLidar, dict(_FLASH_128, max_range=3000.0, range_sigma=0.10)),
+    "dragoneye": (FlashLidar, dict(_FLASH_128, max_range=1500.0, range_sigma=0.15)),
     "kinect1": (DepthCamera, {}),
     "surface-hpr": (SurfaceSampler, dict(n_points=500, hpr_radius_factor=100.0)),
 }

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any, ClassVar
 
@@ -10,14 +9,11 @@ import numpy as np
 
 from relnav.errors import ConfigError
 from relnav.sim.sensors.base import (
-    _check_prob,
     _check_ranges,
     _jsonable,
     _num,
     _RaySensor,
 )
-
-log = logging.getLogger(__name__)
 
 
 class ScanningLidar(_RaySensor):
@@ -98,10 +94,7 @@ class ScanningLidar(_RaySensor):
             self.azimuth_fov_deg = (lo, hi)
         self.min_range, self.max_range_m = _check_ranges(min_range, max_range)
         self.range_sigma = _num("range_sigma", range_sigma, lo=0.0)
-        self.dropout = _check_prob("dropout", dropout)
-        self.max_incidence_deg = _num("max_incidence_deg", max_incidence_deg, lo=0.0)
-        if self.max_incidence_deg > 90.0:
-            raise ConfigError(f"max_incidence_deg must be <= 90, got {self.max_incidence_deg}")
+        self._set_gates(dropout, max_incidence_deg)
         self._dirs = None
 
     def to_dict(self) -> dict[str, Any]:
