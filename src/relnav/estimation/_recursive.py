@@ -707,8 +707,7 @@ class RecursiveEstimator:
         return base
 
     def __repr__(self) -> str:
-        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
-        return f"{type(self).__name__}({opts})"
+        return options_repr(self)
 
     def estimate(self, src_pts: np.ndarray, tgt_pts: np.ndarray, corr: Correspondences) -> Estimate:
         """Estimate ``T_target_source`` (``target ≈ T @ source``) from correspondences.
@@ -839,21 +838,38 @@ class RecursiveEstimator:
         )
 
     def _flagged(self, problem: str, n: int, info: dict[str, Any] | None = None) -> Estimate:
-        status: EstimateStatus = "failed" if problem.startswith("failed") else "degenerate"
-        msg = problem.split(": ", 1)[1] if ": " in problem else problem
-        log.debug("%s: %s (%s)", self.name, status, msg)
-        full = {"estimator": self.name, "message": msg}
-        if info:
-            full.update(info)
-        full["n_correspondences"] = n
-        return Estimate(
-            T_target_source=np.eye(4),
-            covariance=None,
-            n_used=0,
-            status=status,
-            converged=False,
-            info=full,
-        )
+        return flagged_estimate(self.name, problem, n, info)
+
+
+def options_repr(estimator: Any) -> str:
+    """``ClassName(option=value, ...)`` from ``estimator.options()``."""
+    opts = ", ".join(f"{k}={v!r}" for k, v in estimator.options().items())
+    return f"{type(estimator).__name__}({opts})"
+
+
+def flagged_estimate(
+    name: str, problem: str, n: int, info: dict[str, Any] | None = None
+) -> Estimate:
+    """The identity with status ``failed`` (``problem`` starts with "failed") or ``degenerate``.
+
+    ``problem`` is ``"<status>: <message>"`` (or the message alone); ``info`` gets the
+    estimator ``name``, the message, ``info`` and ``n_correspondences = n``.
+    """
+    status: EstimateStatus = "failed" if problem.startswith("failed") else "degenerate"
+    msg = problem.split(": ", 1)[1] if ": " in problem else problem
+    log.debug("%s: %s (%s)", name, status, msg)
+    full = {"estimator": name, "message": msg}
+    if info:
+        full.update(info)
+    full["n_correspondences"] = n
+    return Estimate(
+        T_target_source=np.eye(4),
+        covariance=None,
+        n_used=0,
+        status=status,
+        converged=False,
+        info=full,
+    )
 
 
 # ---------------------------------------------------------------------------------------------

@@ -20,6 +20,8 @@ from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     _check_positive,
     check_geometry,
+    flagged_estimate,
+    options_repr,
     prepare_correspondences,
     residual_covariance,
 )
@@ -95,8 +97,7 @@ class SVDEstimator:
         }
 
     def __repr__(self) -> str:
-        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
-        return f"SVDEstimator({opts})"
+        return options_repr(self)
 
     def estimate(self, src_pts: np.ndarray, tgt_pts: np.ndarray, corr: Correspondences) -> Estimate:
         """Kabsch/Umeyama ``T_target_source`` (``target ≈ T @ source``).
@@ -132,13 +133,4 @@ class SVDEstimator:
         )
 
     def _flagged(self, problem: str, n: int) -> Estimate:
-        status = "failed" if problem.startswith("failed") else "degenerate"
-        msg = problem.split(": ", 1)[1] if ": " in problem else problem
-        return Estimate(
-            T_target_source=np.eye(4),
-            covariance=None,
-            n_used=0,
-            status=status,
-            converged=False,
-            info={"estimator": self.name, "message": msg, "n_correspondences": n},
-        )
+        return flagged_estimate(self.name, problem, n)
