@@ -41,12 +41,10 @@ from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     _check_positive,
     check_geometry,
-    flagged_estimate,
-    options_repr,
-    prepare_correspondences,
     residual_covariance,
 )
-from relnav.estimation.base import Estimate, register_estimator
+from relnav.estimation.base import Estimate, options_repr, register_estimator
+from relnav.estimation.prepared import usable_correspondences
 from relnav.geometry.icp_solver import ICPSolver
 from relnav.geometry.se3 import transform_points, umeyama
 from relnav.matching.correspondences import Correspondences
@@ -148,18 +146,9 @@ class ICPRefineEstimator:
             ``info`` has ``mode``, ``init``, ``refined``, ``rmse`` (m) and ICP/trimming
             diagnostics. Data problems never raise (flagged status, identity).
         """
-        prep, problem = prepare_correspondences(src_pts, tgt_pts, corr)
-        if prep is None:
-            return self._flagged(problem, len(corr))
-        n = prep.a.shape[0]
-        geo = {
-            "min_count": self.min_correspondences,
-            "collinear_tol": self.collinear_tol,
-            "coplanar_tol": None,
-        }
-        reason = check_geometry(prep.a, **geo) or check_geometry(prep.b, **geo)
-        if reason:
-            return self._flagged("degenerate: " + reason, n)
+        prep, flagged = usable_correspondences(self, src_pts, tgt_pts, corr, None)
+        if flagged is not None:
+            return flagged
         T_k, rmse_k = umeyama(prep.b, prep.a)
         info: dict[str, Any] = {"estimator": self.name, "mode": self.mode, "init": self.init}
         if self.mode == "trimmed":
@@ -260,6 +249,3 @@ class ICPRefineEstimator:
             converged=bool(converged),
             info=info,
         )
-
-    def _flagged(self, problem: str, n: int) -> Estimate:
-        return flagged_estimate(self.name, problem, n)

@@ -19,13 +19,10 @@ import numpy as np
 from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     _check_positive,
-    check_geometry,
-    flagged_estimate,
-    options_repr,
-    prepare_correspondences,
     residual_covariance,
 )
-from relnav.estimation.base import Estimate, register_estimator
+from relnav.estimation.base import Estimate, options_repr, register_estimator
+from relnav.estimation.prepared import usable_correspondences
 from relnav.geometry.se3 import umeyama
 from relnav.matching.correspondences import Correspondences
 
@@ -106,18 +103,12 @@ class SVDEstimator:
         <relnav.estimation._recursive.RecursiveEstimator.estimate>`; ``info`` has ``rmse`` (m)
         and, when weighted, ``weights``. Data problems never raise (flagged status, identity).
         """
-        prep, problem = prepare_correspondences(src_pts, tgt_pts, corr)
-        if prep is None:
-            return self._flagged(problem, len(corr))
+        prep, flagged = usable_correspondences(
+            self, src_pts, tgt_pts, corr, self.coplanar_tol if self.reject_coplanar else None
+        )
+        if flagged is not None:
+            return flagged
         n = prep.a.shape[0]
-        geo_kw = {
-            "min_count": self.min_correspondences,
-            "collinear_tol": self.collinear_tol,
-            "coplanar_tol": self.coplanar_tol if self.reject_coplanar else None,
-        }
-        reason = check_geometry(prep.a, **geo_kw) or check_geometry(prep.b, **geo_kw)
-        if reason:
-            return self._flagged("degenerate: " + reason, n)
         w = None
         if self.weights == "inverse":
             w = 1.0 / np.maximum(self.m_scale * prep.d, self.m_min)
@@ -131,6 +122,3 @@ class SVDEstimator:
             converged=True,
             info={"estimator": self.name, "rmse": rmse, "weights": self.weights},
         )
-
-    def _flagged(self, problem: str, n: int) -> Estimate:
-        return flagged_estimate(self.name, problem, n)
