@@ -14,13 +14,35 @@ from relnav.errors import ConfigError
 console = Console()
 
 
-def parse_options(items: Iterable[str] | None) -> dict[str, Any]:
-    """``["a=1", "b.c=true"]`` → ``{"a": 1, "b": {"c": True}}`` (values parsed as YAML)."""
+def parse_options(
+    items: Iterable[str] | None, *, flag: str = "option", nested: bool = True
+) -> dict[str, Any]:
+    """Parse repeated ``key=value`` command-line options.
+
+    Parameters
+    ----------
+    items : iterable of str or None
+        The options as typed, e.g. ``["a=1", "b.c=true"]``.
+    flag : str
+        How the error message names an option (``"option"``, ``"--param"``).
+    nested : bool
+        True: values parsed as YAML and dotted keys nested, ``{"a": 1, "b": {"c": True}}``.
+        False: a flat ``{key: raw string}`` (dotted keys kept whole, values left for the
+        consumer to parse, e.g. :func:`relnav.sim.scenario.apply_overrides`).
+
+    Raises
+    ------
+    ConfigError
+        An item without ``=`` or key, or (nested) a key that is both a value and a section.
+    """
     out: dict[str, Any] = {}
     for item in items or []:
         key, sep, raw = item.partition("=")
         if not sep or not key.strip():
-            raise ConfigError(f"option {item!r} is not of the form key=value")
+            raise ConfigError(f"{flag} {item!r} is not of the form key=value")
+        if not nested:
+            out[key.strip()] = raw
+            continue
         try:
             value = yaml.safe_load(raw)
         except yaml.YAMLError:
@@ -31,7 +53,7 @@ def parse_options(items: Iterable[str] | None) -> dict[str, Any]:
         for p in parts[:-1]:
             node = node.setdefault(p, {})
             if not isinstance(node, dict):
-                raise ConfigError(f"option {item!r} conflicts with another option")
+                raise ConfigError(f"{flag} {item!r} conflicts with another option")
         node[parts[-1]] = value
     return out
 

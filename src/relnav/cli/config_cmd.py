@@ -32,7 +32,8 @@ def dump(
     Edit it and run it: [bold]relnav config dump --preset sim-orion > my.yaml[/] then
     [bold]relnav simulate my.yaml --out seq[/].
     """
-    from relnav.cli.simulate import _params, build_scenario
+    from relnav.cli._common import parse_options
+    from relnav.cli.simulate import build_scenario
     from relnav.sim.scenario import apply_overrides, default_scenario, load_scenario, scenario_yaml
 
     if preset is None:
@@ -42,11 +43,16 @@ def dump(
             updates["frames"] = frames
         if seed is not None:
             updates["seed"] = seed
-        params = _params(param)
+        params = parse_options(param, flag="--param", nested=False)
         data = apply_overrides(sc.model_dump(mode="json"), {**params, **updates})
         sc = load_scenario(data, check=False)
     else:
-        sc = build_scenario(preset, frames=frames, seed=seed, params=_params(param))
+        sc = build_scenario(
+            preset,
+            frames=frames,
+            seed=seed,
+            params=parse_options(param, flag="--param", nested=False),
+        )
     text = scenario_yaml(sc)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -7,18 +7,8 @@ from typing import Any
 
 import typer
 
-from relnav.cli._common import console, progress_bar
+from relnav.cli._common import console, parse_options, progress_bar
 from relnav.errors import ConfigError
-
-
-def _params(items: list[str] | None) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items or []:
-        key, sep, raw = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"--param {item!r} is not of the form key=value")
-        out[key.strip()] = raw
-    return out
 
 
 def build_scenario(
@@ -158,7 +148,7 @@ def simulate(
         seed=seed,
         target_mesh=target_mesh,
         scale_to=scale_to,
-        params=_params(param),
+        params=parse_options(param, flag="--param", nested=False),
     )
     n_sim = sc.frames if sc.max_frames is None else min(sc.frames, sc.max_frames)
     with progress_bar() as bar:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -22,6 +22,7 @@ __all__ = [
     "TransformEstimator",
     "available_estimators",
     "get_estimator",
+    "options_repr",
     "register_estimator",
 ]
 
@@ -100,3 +101,9 @@ def get_estimator(name: str, **options: object) -> TransformEstimator:
         return _REGISTRY[name][0](**options)
     except TypeError as e:
         raise ConfigError(f"bad options for estimator {name!r}: {e}") from None
+
+
+def options_repr(estimator: Any) -> str:
+    """``ClassName(option=value, ...)`` from ``estimator.options()``."""
+    opts = ", ".join(f"{k}={v!r}" for k, v in estimator.options().items())
+    return f"{type(estimator).__name__}({opts})"

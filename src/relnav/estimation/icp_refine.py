@@ -5,9 +5,9 @@ produced by the GCC process, rather than on the entire ``P_k``". **[interpretati
 correspondences' *support* is read as the two point subsets they involve: the distinct source
 points ``{b_u}`` and the distinct target points ``{a_u}``. ICP (relnav's ``icp-point``, Paper 1's
 settings: nearest-neighbour association, mean + 2.5σ outlier rule, 20 iterations, scale-aware gate
-``10·Tr`` of the source subset; :class:`relnav.registration.icp.ICP`) then aligns the source
-subset onto the target subset, re-associating nearest neighbours at every iteration — the
-descriptor pairing only chooses the points.
+``10·Tr`` of the source subset; :class:`relnav.geometry.icp_solver.ICPSolver`, the solver behind
+``icp-point``) then aligns the source subset onto the target subset, re-associating nearest
+neighbours at every iteration — the descriptor pairing only chooses the points.
 
 Options (``get_estimator("icp", mode=..., init=...)``):
 
@@ -41,10 +41,11 @@ from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     _check_positive,
     check_geometry,
-    prepare_correspondences,
     residual_covariance,
 )
-from relnav.estimation.base import Estimate, register_estimator
+from relnav.estimation.base import Estimate, options_repr, register_estimator
+from relnav.estimation.prepared import usable_correspondences
+from relnav.geometry.icp_solver import ICPSolver
 from relnav.geometry.se3 import transform_points, umeyama
 from relnav.matching.correspondences import Correspondences
 
@@ -125,8 +126,7 @@ class ICPRefineEstimator:
         }
 
     def __repr__(self) -> str:
-        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
-        return f"ICPRefineEstimator({opts})"
+        return options_repr(self)
 
     def estimate(self, src_pts: np.ndarray, tgt_pts: np.ndarray, corr: Correspondences) -> Estimate:
         """``T_target_source`` (``target ≈ T @ source``) from the correspondences' points.
@@ -146,18 +146,9 @@ class ICPRefineEstimator:
             ``info`` has ``mode``, ``init``, ``refined``, ``rmse`` (m) and ICP/trimming
             diagnostics. Data problems never raise (flagged status, identity).
         """
-        prep, problem = prepare_correspondences(src_pts, tgt_pts, corr)
-        if prep is None:
-            return self._flagged(problem, len(corr))
-        n = prep.a.shape[0]
-        geo = {
-            "min_count": self.min_correspondences,
-            "collinear_tol": self.collinear_tol,
-            "coplanar_tol": None,
-        }
-        reason = check_geometry(prep.a, **geo) or check_geometry(prep.b, **geo)
-        if reason:
-            return self._flagged("degenerate: " + reason, n)
+        prep, flagged = usable_correspondences(self, src_pts, tgt_pts, corr, None)
+        if flagged is not None:
+            return flagged
         T_k, rmse_k = umeyama(prep.b, prep.a)
         info: dict[str, Any] = {"estimator": self.name, "mode": self.mode, "init": self.init}
         if self.mode == "trimmed":
@@ -176,12 +167,10 @@ class ICPRefineEstimator:
         a: np.ndarray,
         info: dict[str, Any],
     ) -> Estimate:
-        from relnav.registration.icp import ICP
-
         src = np.asarray(src_pts, dtype=np.float64)[np.unique(corr.src_idx)]
         tgt = np.asarray(tgt_pts, dtype=np.float64)[np.unique(corr.tgt_idx)]
         T0 = T_k if self.init == "kabsch" else np.eye(4)
-        icp = ICP(
+        icp = ICPSolver(
             "point",
             max_iter=self.max_iter,
             gate_factor=self.gate_factor,
@@ -259,16 +248,4 @@ class ICPRefineEstimator:
             status="ok",
             converged=bool(converged),
             info=info,
-        )
-
-    def _flagged(self, problem: str, n: int) -> Estimate:
-        status = "failed" if problem.startswith("failed") else "degenerate"
-        msg = problem.split(": ", 1)[1] if ": " in problem else problem
-        return Estimate(
-            T_target_source=np.eye(4),
-            covariance=None,
-            n_used=0,
-            status=status,
-            converged=False,
-            info={"estimator": self.name, "message": msg, "n_correspondences": n},
         )

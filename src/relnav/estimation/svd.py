@@ -19,11 +19,10 @@ import numpy as np
 from relnav.errors import ConfigError
 from relnav.estimation._recursive import (
     _check_positive,
-    check_geometry,
-    prepare_correspondences,
     residual_covariance,
 )
-from relnav.estimation.base import Estimate, register_estimator
+from relnav.estimation.base import Estimate, options_repr, register_estimator
+from relnav.estimation.prepared import usable_correspondences
 from relnav.geometry.se3 import umeyama
 from relnav.matching.correspondences import Correspondences
 
@@ -95,8 +94,7 @@ class SVDEstimator:
         }
 
     def __repr__(self) -> str:
-        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
-        return f"SVDEstimator({opts})"
+        return options_repr(self)
 
     def estimate(self, src_pts: np.ndarray, tgt_pts: np.ndarray, corr: Correspondences) -> Estimate:
         """Kabsch/Umeyama ``T_target_source`` (``target ≈ T @ source``).
@@ -105,18 +103,12 @@ class SVDEstimator:
         <relnav.estimation._recursive.RecursiveEstimator.estimate>`; ``info`` has ``rmse`` (m)
         and, when weighted, ``weights``. Data problems never raise (flagged status, identity).
         """
-        prep, problem = prepare_correspondences(src_pts, tgt_pts, corr)
-        if prep is None:
-            return self._flagged(problem, len(corr))
+        prep, flagged = usable_correspondences(
+            self, src_pts, tgt_pts, corr, self.coplanar_tol if self.reject_coplanar else None
+        )
+        if flagged is not None:
+            return flagged
         n = prep.a.shape[0]
-        geo_kw = {
-            "min_count": self.min_correspondences,
-            "collinear_tol": self.collinear_tol,
-            "coplanar_tol": self.coplanar_tol if self.reject_coplanar else None,
-        }
-        reason = check_geometry(prep.a, **geo_kw) or check_geometry(prep.b, **geo_kw)
-        if reason:
-            return self._flagged("degenerate: " + reason, n)
         w = None
         if self.weights == "inverse":
             w = 1.0 / np.maximum(self.m_scale * prep.d, self.m_min)
@@ -129,16 +121,4 @@ class SVDEstimator:
             status="ok",
             converged=True,
             info={"estimator": self.name, "rmse": rmse, "weights": self.weights},
-        )
-
-    def _flagged(self, problem: str, n: int) -> Estimate:
-        status = "failed" if problem.startswith("failed") else "degenerate"
-        msg = problem.split(": ", 1)[1] if ": " in problem else problem
-        return Estimate(
-            T_target_source=np.eye(4),
-            covariance=None,
-            n_used=0,
-            status=status,
-            converged=False,
-            info={"estimator": self.name, "message": msg, "n_correspondences": n},
         )

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from relnav.errors import InputError
 from relnav.eval.metrics import _as_poses, pose_errors
 
-__all__ = ["plot_errors", "plot_trajectories"]
+__all__ = ["new_figure", "plot_errors", "plot_trajectories", "save_png"]
 
 log = logging.getLogger(__name__)
 
@@ -30,10 +30,19 @@ def _check_estimates(estimates: Mapping[str, np.ndarray]) -> dict[str, np.ndarra
     return {str(k): _as_poses(f"estimates[{k!r}]", v) for k, v in estimates.items()}
 
 
-def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
+def new_figure(width: float, height: float) -> Figure:
+    """A matplotlib figure (inches, constrained layout) on the Agg canvas: no ``pyplot``."""
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_png(fig: Figure, path: str | Path, dpi: int, *, what: str = "plots") -> Path:
+    """Write ``fig`` to the PNG ``path`` (folders created); ``what`` names the figures in the
+    error raised for another suffix."""
     out = Path(path)
     if out.suffix.lower() != ".png":
-        raise InputError(f"{out}: plots are written as PNG; use a .png file name")
+        raise InputError(f"{out}: {what} are written as PNG; use a .png file name")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)
     log.debug("wrote %s", out)
@@ -81,8 +90,7 @@ def plot_trajectories(
     gt = None if gt_poses is None else _as_poses("gt_poses", gt_poses)
     if gt is None and not est:
         raise InputError("plot_trajectories: nothing to plot (no ground truth, no estimates)")
-    fig = Figure(figsize=(15.5, 5.6), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure(15.5, 5.6)
     # the 3-D panel gets its own wider column so its z label cannot reach the top view's y label
     gs = fig.add_gridspec(1, 3, width_ratios=(1.15, 1.0, 1.0), wspace=0.08)
     ax3 = fig.add_subplot(gs[0, 0], projection="3d")
@@ -129,7 +137,7 @@ def plot_trajectories(
     )
     if title:
         fig.suptitle(title)
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi)
 
 
 def plot_errors(
@@ -195,8 +203,7 @@ def plot_errors(
     if log_scale is None:
         pos = [p for p in peaks if p > 0]
         log_scale = len(pos) > 1 and max(pos) > 20 * min(pos)
-    fig = Figure(figsize=(9, 10.5), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure(9, 10.5)
     axes = fig.subplots(5, 1, sharex=True)
     labels = ["‖Δ‖ [m]", "Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
     for name, pe in errs.items():
@@ -224,4 +231,4 @@ def plot_errors(
     )
     scale_note = " (log scales)" if log_scale else ""
     fig.suptitle((title or "Error with respect to the ground truth") + scale_note)
-    return _save(fig, path, dpi)
+    return save_png(fig, path, dpi)

@@ -27,6 +27,7 @@ __all__ = [
     "available_methods",
     "get_registration",
     "register_method",
+    "register_variants",
 ]
 
 
@@ -71,6 +72,34 @@ def register_method(
         return factory
 
     return deco
+
+
+def register_variants(cls: type, variants: dict[str, tuple[str, str]]) -> None:
+    """Register ``cls(variant, **options)`` under each method prefix of ``variants``.
+
+    ``variants`` maps a prefix to ``(variant, description)``; a method spec ``paper`` or
+    ``scale`` sets ``thresholds`` (``"icp-point:paper"``), examples are ``prefix`` and
+    ``prefix:paper``. The factories' return annotation is ``cls``, so :func:`get_registration`
+    checks the options against ``cls``'s signature.
+    """
+    for prefix, (variant, description) in variants.items():
+        register_method(prefix, description, examples=[prefix, f"{prefix}:paper"])(
+            _threshold_factory(cls, prefix, variant)
+        )
+
+
+def _threshold_factory(cls: type, prefix: str, variant: str) -> Callable[..., Registration]:
+    def factory(spec: str | None, **options: Any) -> Registration:
+        if spec:
+            s = spec.strip().lower()
+            if s not in ("paper", "scale"):
+                raise ConfigError(f"{prefix}: spec must be 'paper' or 'scale', got {spec!r}")
+            options = {**options, "thresholds": s}
+        return cls(variant, **options)
+
+    factory.__annotations__ = {**factory.__annotations__, "return": cls}
+    factory.__name__ = factory.__qualname__ = f"_make_{prefix.replace('-', '_')}"
+    return factory
 
 
 METHOD_MODULES: tuple[str, ...] = (

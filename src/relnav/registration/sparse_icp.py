@@ -51,20 +51,17 @@ import numpy as np
 from numba import njit
 
 from relnav.errors import ConfigError
-from relnav.registration.base import register_method
-from relnav.registration.icp import (
-    ICP,
+from relnav.geometry.eigen import jacobi_eigh
+from relnav.geometry.icp_kernels import _horn_rotation, _rodrigues_nb, _transform
+from relnav.geometry.icp_solver import (
     PAPER_GATE,
-    PreparedCloud,
-    _failed,
-    _horn_rotation,
-    _jacobi_eigh,
-    _rodrigues_nb,
-    _total,
-    _transform,
-    check_init,
-    prepare_cloud,
+    register_clouds,
+    start_pair,
+    with_normals,
 )
+from relnav.geometry.prepared_cloud import PreparedCloud, prepare_cloud
+from relnav.registration.base import register_variants
+from relnav.registration.icp import ICP, _failed
 from relnav.registration.result import RegistrationResult
 
 __all__ = ["SparseICP", "shrink"]
@@ -193,7 +190,7 @@ def _plane_fit(
             b[p] -= a6[p] * r
             for q in range(6):
                 A[p, q] += a6[p] * a6[q]
-    w, V = _jacobi_eigh(A)
+    w, V = jacobi_eigh(A)
     ok = True
     x = np.zeros(6)
     wmax = w.max()
@@ -497,49 +494,26 @@ class SparseICP:
 
         ``target_normals`` (M, 3) replaces the PCA normals of point-to-plane.
         """
-        src = prepare_cloud(
+        return register_clouds(
+            self,
             source,
-            min_points=self.min_points,
+            target,
+            init=init,
+            target_normals=target_normals,
             resolution=self.thresholds == "scale" and self.inlier_distance is None,
-            name="source",
         )
-        tgt = self.prepare(target, normals=target_normals, name="target")
-        result = self.register_prepared(src, tgt, init=init)
-        result.timings["prepare"] = result.timings.get("prepare", 0.0) + _total(tgt.timings)
-        return result
 
     def register_prepared(
         self, source: PreparedCloud, target: PreparedCloud, *, init: np.ndarray | None = None
     ) -> RegistrationResult:
         """Register two prepared clouds (see :meth:`prepare`); source timings are counted."""
-        timings: dict[str, float] = {"prepare": _total(source.timings)}
-        info: dict[str, Any] = {
-            "variant": self.variant,
-            "thresholds": self.thresholds,
-            "p": self.p,
-            "n_source": int(source.points.shape[0]),
-            "n_target": int(target.points.shape[0]),
-            "n_dropped_source": source.n_dropped,
-            "n_dropped_target": target.n_dropped,
-            "n_iterations": 0,
-        }
-        T0, msg = check_init(init)
-        if T0 is None:
-            return _failed("failed", msg, np.eye(4), timings, info)
-        for cloud, nm in ((source, "source"), (target, "target")):
-            if not cloud.ok:
-                m = cloud.message if cloud.message.startswith(nm) else f"{nm}: {cloud.message}"
-                return _failed(cloud.status, m, T0, timings, info)
+        head = {"variant": self.variant, "thresholds": self.thresholds, "p": self.p}
+        T0, timings, info, failed = start_pair(source, target, init, head, {"n_iterations": 0})
+        if failed is not None:
+            return failed
         assert target.tree is not None
-        if self.variant == "plane" and target.normals is None:
-            target = prepare_cloud(
-                target.points,
-                min_points=self.min_points,
-                normals="pca",
-                normal_k=self.normal_k,
-                resolution=False,
-                name="target",
-            )
+        if self.variant == "plane":
+            target = with_normals(target, min_points=self.min_points, normal_k=self.normal_k)
         # scale normalisation
         if self.thresholds == "scale":
             lo, hi = target.points.min(axis=0), target.points.max(axis=0)
@@ -675,28 +649,18 @@ class SparseICP:
         )
 
 
-def _make(variant: str, spec: str | None, options: dict[str, Any]) -> SparseICP:
-    if spec:
-        s = spec.strip().lower()
-        if s not in ("paper", "scale"):
-            raise ConfigError(f"sicp-{variant}: spec must be 'paper' or 'scale', got {spec!r}")
-        options = {**options, "thresholds": s}
-    return SparseICP(variant, **options)  # type: ignore[arg-type]
-
-
-@register_method(
-    "sicp-point",
-    "Sparse ICP point-to-point (Bouaziz et al. 2013; ℓp ADMM, p=0.5, 20 iterations; paper 1)",
-    examples=["sicp-point", "sicp-point:paper"],
+register_variants(
+    SparseICP,
+    {
+        "sicp-point": (
+            "point",
+            "Sparse ICP point-to-point (Bouaziz et al. 2013; ℓp ADMM, p=0.5, 20 iterations; "
+            "paper 1)",
+        ),
+        "sicp-plane": (
+            "plane",
+            "Sparse ICP point-to-plane (Bouaziz et al. 2013; ℓp ADMM, p=0.5, 20 iterations; "
+            "paper 1)",
+        ),
+    },
 )
-def _make_sicp_point(spec: str | None, **options: Any) -> SparseICP:
-    return _make("point", spec, options)
-
-
-@register_method(
-    "sicp-plane",
-    "Sparse ICP point-to-plane (Bouaziz et al. 2013; ℓp ADMM, p=0.5, 20 iterations; paper 1)",
-    examples=["sicp-plane", "sicp-plane:paper"],
-)
-def _make_sicp_plane(spec: str | None, **options: Any) -> SparseICP:
-    return _make("plane", spec, options)

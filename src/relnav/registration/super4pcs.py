@@ -59,13 +59,13 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError
+from relnav.geometry.icp_solver import start_pair
 from relnav.registration.base import register_method
 from relnav.registration.icp import (
     PAPER_GATE,
     PreparedCloud,
     _failed,
     _total,
-    check_init,
     prepare_cloud,
 )
 from relnav.registration.result import RegistrationResult
@@ -301,22 +301,10 @@ class Super4PCS:
         self, source: PreparedCloud, target: PreparedCloud, *, init: np.ndarray | None = None
     ) -> RegistrationResult:
         """Register two prepared clouds; source preparation time is counted."""
-        timings: dict[str, float] = {"prepare": _total(source.timings)}
-        info: dict[str, Any] = {
-            "seed": self.seed,
-            "overlap": self.overlap,
-            "n_source": int(source.points.shape[0]),
-            "n_target": int(target.points.shape[0]),
-            "n_dropped_source": source.n_dropped,
-            "n_dropped_target": target.n_dropped,
-        }
-        T0, msg = check_init(init)
-        if T0 is None:
-            return _failed("failed", msg, np.eye(4), timings, info)
-        for cloud, nm in ((source, "source"), (target, "target")):
-            if not cloud.ok:
-                m = cloud.message if cloud.message.startswith(nm) else f"{nm}: {cloud.message}"
-                return _failed(cloud.status, m, T0, timings, info)
+        head = {"seed": self.seed, "overlap": self.overlap}
+        T0, timings, info, failed = start_pair(source, target, init, head)
+        if failed is not None:
+            return failed
         rng = np.random.default_rng(self.seed)
         tc = time.perf_counter()
         Ps = target.points[voxel_sample(target.points, self.sample_size, rng)]
