@@ -13,6 +13,11 @@ Paper 1's filter estimates ``x = [r11 r12 r13 r21 r22 r23 r31 r32 r33 tx ty tz]`
 ``a_u = tgt_pts[tgt_idx[u]]`` (a point of ``P_k``) to build ``H_u`` and the measurement is
 ``ψ_u = b_u = src_pts[src_idx[u]]`` (a point of ``P_{k+1}``). The filter's own output is therefore
 ``T_source_target`` (``= T_{k+1,k}``); the estimators return its inverse ``T_target_source``.
+
+Layout: this module holds the base class :class:`RecursiveEstimator` and re-exports the pieces,
+each in its own module: :mod:`._state` (state ↔ transform, ``H_u``), :mod:`._prepare`
+(correspondences, degeneracy, ``M_u``), :mod:`._covariance`, :mod:`._kernels` (numba 12-state
+helpers) and :mod:`._nlms` (the NLMS-type sweep).
 """
 
 from __future__ import annotations
@@ -22,12 +27,35 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numba import njit
 
-from relnav.errors import ConfigError, InputError
+from relnav.errors import ConfigError
+from relnav.estimation._covariance import residual_covariance, state_covariance_to_twist
+from relnav.estimation._kernels import _cholesky as _cholesky
+from relnav.estimation._kernels import _h_apply as _h_apply
+from relnav.estimation._kernels import _ht_apply as _ht_apply
+from relnav.estimation._kernels import _inv3 as _inv3
+from relnav.estimation._kernels import _p_ht as _p_ht
+from relnav.estimation._kernels import _spd_inverse as _spd_inverse
+from relnav.estimation._nlms import _nlms_kernel as _nlms_kernel
+from relnav.estimation._nlms import nlms_options as nlms_options
+from relnav.estimation._nlms import run_nlms
+from relnav.estimation._prepare import (
+    AdaptiveMode,
+    Prepared,
+    adaptive_factors,
+    check_geometry,
+    prepare_correspondences,
+)
+from relnav.estimation._state import (
+    filter_to_target_source,
+    identity_state,
+    measurement_matrix,
+    project_state,
+    state_to_transform,
+    transform_to_state,
+)
 from relnav.estimation.base import Estimate, EstimateStatus
-from relnav.geometry.rotations import hat
-from relnav.geometry.se3 import from_rt, invert, transform_points
+from relnav.geometry.se3 import transform_points
 from relnav.matching.correspondences import Correspondences
 
 __all__ = [
@@ -53,7 +81,6 @@ log = logging.getLogger(__name__)
 DEFAULT_MAX_PASSES = 200
 """Cap on the sweeps over Ω of the coherent filters (they stop earlier when converged)."""
 
-AdaptiveMode = Literal["per_match", "sum", "none"]
 CovarianceMode = Literal["filter", "residual", "none"]
 
 # ---------------------------------------------------------------------------------------------
@@ -61,249 +88,9 @@ CovarianceMode = Literal["filter", "residual", "none"]
 # ---------------------------------------------------------------------------------------------
 
 
-def identity_state() -> np.ndarray:
-    """``x₀ = vec(I₃) ⊕ 0₃`` (12,), Paper 1's initialisation."""
-    x = np.zeros(12)
-    x[[0, 4, 8]] = 1.0
-    return x
-
-
-def transform_to_state(T: np.ndarray) -> np.ndarray:
-    """12-state ``[R row-major (9), t (3)]`` of a ``4x4`` transform (filter frame)."""
-    T = np.asarray(T, dtype=np.float64)
-    return np.concatenate([T[:3, :3].reshape(9), T[:3, 3]])
-
-
-def measurement_matrix(a: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """``H_u`` (3, 12) of §D.3 for a target point ``a`` (3,): ``H_u x = R a + t``.
-
-    ``scale`` multiplies the whole matrix (``M`` in the printed eq. 10; 1 in the coherent
-    interpretation).
-    """
-    a = np.asarray(a, dtype=np.float64).reshape(3)
-    H = np.zeros((3, 12))
-    for i in range(3):
-        H[i, 3 * i : 3 * i + 3] = a
-        H[i, 9 + i] = 1.0
-    return scale * H
-
-
-def _polar(M: np.ndarray) -> np.ndarray:
-    """Nearest proper rotation(s) ``U diag(1, 1, det(U Vᵀ)) Vᵀ`` of (..., 3, 3) matrices."""
-    U, _, Vt = np.linalg.svd(M)
-    d = np.where(np.linalg.det(U @ Vt) >= 0, 1.0, -1.0)
-    U = U.copy()
-    U[..., :, 2] *= d[..., None]
-    return U @ Vt
-
-
-def project_state(
-    x: np.ndarray,
-    *,
-    refit_t: bool = False,
-    a_mean: np.ndarray | None = None,
-    b_mean: np.ndarray | None = None,
-    metric: np.ndarray | None = None,
-    a_ref: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Output projection of §D.5: a rotation from ``R̂ = reshape(x[:9], 3, 3)`` and ``t``.
-
-    Parameters
-    ----------
-    x : (12,) float64
-        Raw filter state (filter frame, maps ``P_k`` → ``P_{k+1}``).
-    refit_t : bool
-        If True, ``t = mean(b) − R mean(a)`` (= ``mean_u(b_u − R a_u)``) instead of ``x[9:12]``
-        **[interpretation, §D.5]**; needs ``a_mean`` and ``b_mean``.
-    a_mean, b_mean : (3,) float64
-        Centroids of the used target (``P_k``) and source (``P_{k+1}``) points, metres.
-    metric : (3, 3) float64, optional
-        ``None``: Frobenius projection ``R = polar(R̂)`` (Paper 1's reading). Else the
-        (weighted) scatter ``C = Σ w_u (a_u − ā)(a_u − ā)ᵀ`` of the used target points: ``R =
-        polar(R̂ C) = argmin_R Σ_u w_u ‖(R̂ − R)(a_u − ā)‖²``, the rotation whose predictions of
-        the measurements are closest to the filter's **[interpretation]**.
-    a_ref : (3,) float64, optional
-        If given (and not ``refit_t``), ``t = x[9:12] + (R̂ − R) a_ref``: the projected transform
-        predicts the same point as the filter at ``a_ref`` (the used points' centroid), which
-        makes ``t`` independent of the coordinate origin. ``None``: ``t = x[9:12]``.
-
-    Returns
-    -------
-    R : (3, 3) proper rotation (det +1).
-    t : (3,) translation, metres.
-    """
-    M = np.asarray(x[:9], dtype=np.float64).reshape(3, 3)
-    R = _polar(M if metric is None else M @ metric)
-    if refit_t:
-        if a_mean is None or b_mean is None:
-            raise InputError("project_state: refit_t needs a_mean and b_mean")
-        t = np.asarray(b_mean, dtype=np.float64) - R @ np.asarray(a_mean, dtype=np.float64)
-    elif a_ref is not None:
-        t = np.asarray(x[9:12], dtype=np.float64) + (M - R) @ np.asarray(a_ref, dtype=np.float64)
-    else:
-        t = np.asarray(x[9:12], dtype=np.float64).copy()
-    return R, t
-
-
-def filter_to_target_source(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """THE one place where the filter frame is converted to the estimator convention.
-
-    The filter estimates ``T_source_target = [R | t]`` (``b = R a + t``, ``a`` ∈ target ``P_k``,
-    ``b`` ∈ source ``P_{k+1}``); estimators return ``T_target_source = T_source_target⁻¹``.
-    """
-    return invert(from_rt(R, t))
-
-
-def state_to_transform(
-    x: np.ndarray,
-    *,
-    refit_t: bool = False,
-    a_mean: np.ndarray | None = None,
-    b_mean: np.ndarray | None = None,
-    metric: np.ndarray | None = None,
-    a_ref: np.ndarray | None = None,
-) -> np.ndarray:
-    """``T_target_source`` (4, 4) of a raw filter state ``x`` (projection + inversion)."""
-    R, t = project_state(
-        x, refit_t=refit_t, a_mean=a_mean, b_mean=b_mean, metric=metric, a_ref=a_ref
-    )
-    return filter_to_target_source(R, t)
-
-
 # ---------------------------------------------------------------------------------------------
 # Correspondence preparation, adaptive factor and degeneracy
 # ---------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Prepared:
-    """Correspondences in processing order (ascending descriptor distance, ties broken by index).
-
-    Attributes
-    ----------
-    a : (n, 3) float64
-        Target points (``P_k``) — they build ``H_u``.
-    b : (n, 3) float64
-        Source points (``P_{k+1}``) — the measurements ``ψ_u``.
-    d : (n,) float64
-        Descriptor distances.
-    order : (n,) int64
-        Positions in the input ``Correspondences`` in processing order.
-    """
-
-    a: np.ndarray
-    b: np.ndarray
-    d: np.ndarray
-    order: np.ndarray
-
-
-def _as_points(P: np.ndarray, name: str) -> np.ndarray:
-    arr = np.asarray(P, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InputError(f"{name} must be an (N, 3) array, got shape {arr.shape}")
-    return arr
-
-
-def prepare_correspondences(
-    src_pts: np.ndarray, tgt_pts: np.ndarray, corr: Correspondences
-) -> tuple[Prepared | None, str]:
-    """Gather and order the correspondences (§D.3).
-
-    Order: ascending descriptor distance; equal distances are ordered by ``tgt_idx`` then
-    ``src_idx``, so the result does not depend on the input order (deterministic under
-    shuffling).
-
-    Returns
-    -------
-    prepared : Prepared or None
-        None when the data are unusable.
-    problem : str
-        ``""`` on success, ``"failed: ..."`` (non-finite values) or ``"degenerate: ..."``.
-
-    Raises
-    ------
-    InputError
-        Wrong array shapes or correspondence indices out of range (caller errors, not data
-        problems).
-    """
-    src = _as_points(src_pts, "src_pts")
-    tgt = _as_points(tgt_pts, "tgt_pts")
-    if not isinstance(corr, Correspondences):
-        raise InputError(f"corr must be a Correspondences, got {type(corr).__name__}")
-    n = len(corr)
-    if n == 0:
-        return None, "degenerate: no correspondences"
-    si, ti = corr.src_idx, corr.tgt_idx
-    if si.min() < 0 or si.max() >= src.shape[0]:
-        raise InputError(f"corr.src_idx out of range for {src.shape[0]} source points")
-    if ti.min() < 0 or ti.max() >= tgt.shape[0]:
-        raise InputError(f"corr.tgt_idx out of range for {tgt.shape[0]} target points")
-    d = corr.distance
-    if not np.isfinite(d).all():
-        return None, "failed: non-finite descriptor distance"
-    order = np.lexsort((si, ti, d)).astype(np.int64)
-    a = np.ascontiguousarray(tgt[ti[order]])
-    b = np.ascontiguousarray(src[si[order]])
-    if not (np.isfinite(a).all() and np.isfinite(b).all()):
-        return None, "failed: non-finite point coordinates in the correspondences"
-    return Prepared(a=a, b=b, d=np.ascontiguousarray(d[order]), order=order), ""
-
-
-def check_geometry(
-    points: np.ndarray,
-    *,
-    min_count: int = 4,
-    collinear_tol: float = 1e-3,
-    coplanar_tol: float | None = 1e-3,
-) -> str:
-    """Degeneracy test of a set of used points (§D.3).
-
-    With ``σ1 ≥ σ2 ≥ σ3`` the singular values of the centred points: degenerate when
-    fewer than ``min_count`` points, ``σ1 ≈ 0`` (all points coincide), ``σ2/σ1 < collinear_tol``
-    (collinear) or ``σ3/σ1 < coplanar_tol`` (coplanar; skipped when ``coplanar_tol`` is None).
-    Coplanar points leave the 12-state affine model unobservable in the out-of-plane column of
-    ``R`` (§D.3), so they are degenerate for the filters; Kabsch only needs non-collinear points.
-
-    Returns
-    -------
-    str
-        ``""`` when fine, otherwise a short reason.
-    """
-    n = points.shape[0]
-    if n < min_count:
-        return f"{n} correspondences < {min_count} needed"
-    c = points - points.mean(axis=0)
-    # singular values of the centred points = sqrt of the eigenvalues of cᵀc (3x3, cheap)
-    s = np.sqrt(np.clip(np.linalg.eigvalsh(c.T @ c)[::-1], 0.0, None))
-    scale = float(np.abs(points).max()) + 1.0
-    if s[0] <= 1e-12 * scale:
-        return "all correspondence points coincide"
-    if s[1] / s[0] < collinear_tol:
-        return f"correspondence points collinear (σ2/σ1 = {s[1] / s[0]:.2e})"
-    if coplanar_tol is not None and s[2] / s[0] < coplanar_tol:
-        return f"correspondence points coplanar (σ3/σ1 = {s[2] / s[0]:.2e})"
-    return ""
-
-
-def adaptive_factors(
-    d: np.ndarray, mode: AdaptiveMode, *, scale: float = 10.0, m_min: float = 1e-3
-) -> np.ndarray:
-    """Adaptive factor ``M_u`` per correspondence (eq. 11, §D.3).
-
-    ``per_match`` (default, **[interpretation]**): ``M_u = scale·d_u``; ``sum`` (eq. 11 read
-    literally): ``M = scale·Σ d_u`` for every match; ``none``: ``M = 1``. The first two are
-    clamped to ``≥ m_min``.
-    """
-    d = np.asarray(d, dtype=np.float64)
-    if mode == "per_match":
-        m = scale * d
-    elif mode == "sum":
-        m = np.full(d.shape, scale * float(d.sum()))
-    elif mode == "none":
-        return np.ones(d.shape)
-    else:  # pragma: no cover - validated in the constructor
-        raise ConfigError(f"adaptive must be 'per_match', 'sum' or 'none', got {mode!r}")
-    return np.maximum(m, m_min)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -311,210 +98,9 @@ def adaptive_factors(
 # ---------------------------------------------------------------------------------------------
 
 
-def _vee_first_order(dT: np.ndarray) -> np.ndarray:
-    """First-order twist ``[ρ, φ]`` of transforms close to identity, ``(..., 4, 4) -> (..., 6)``."""
-    R = dT[..., :3, :3]
-    w = 0.5 * np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
-    return np.concatenate([dT[..., :3, 3], w], axis=-1)
-
-
-def state_covariance_to_twist(
-    x: np.ndarray,
-    P: np.ndarray,
-    *,
-    refit_t: bool = False,
-    a_mean: np.ndarray | None = None,
-    b_mean: np.ndarray | None = None,
-    b_mean_cov: np.ndarray | None = None,
-    metric: np.ndarray | None = None,
-    a_ref: np.ndarray | None = None,
-    rel_step: float = 1e-6,
-) -> np.ndarray:
-    """Map the 12×12 state covariance to the 6×6 twist covariance of ``T_target_source``.
-
-    The map ``x ↦ T_target_source(x)`` (SO(3) projection of §D.5 with ``metric`` and
-    ``a_ref`` as in :func:`project_state`, optional ``refit_t``, then inversion) is linearised
-    **numerically** by central differences (step
-    ``rel_step·max(1, |x_i|)``) with the **left** perturbation convention
-    ``T = exp(δξ^) T̂`` , ``δξ = [ρ (m), φ (rad)]`` expressed in the target frame:
-    ``J[:, i] = (vee(T(x+h e_i) T̂⁻¹) − vee(T(x−h e_i) T̂⁻¹)) / 2h`` (``vee`` to first order,
-    exact for the derivative). Returns ``J P Jᵀ`` (symmetrised).
-
-    The projection discards the non-rotational (stretch) directions of ``x[:9]``, so those parts
-    of ``P`` do not appear in the result. With ``refit_t`` (``t = b̄ − R ā``) the rotation
-    uncertainty is propagated into ``t``; ``b_mean_cov`` (3×3, covariance of ``b̄`` in the source
-    frame) adds the noise of the refit itself, ``Rᵀ Σ_b̄ R`` on the ``ρ`` block (the correlation
-    between ``b̄`` and ``R`` is neglected — it vanishes for a centred least-squares fit).
-    """
-    x = np.asarray(x, dtype=np.float64)
-    T_hat = state_to_transform(
-        x, refit_t=refit_t, a_mean=a_mean, b_mean=b_mean, metric=metric, a_ref=a_ref
-    )
-    F_hat = invert(T_hat)  # T_source_target
-    h = rel_step * np.maximum(1.0, np.abs(x))
-    X = np.repeat(x[None, :], 24, axis=0)
-    idx = np.arange(12)
-    X[idx, idx] += h
-    X[12 + idx, idx] -= h
-    # batch projection
-    M = X[:, :9].reshape(24, 3, 3)
-    R = _polar(M if metric is None else M @ np.asarray(metric, dtype=np.float64))
-    if refit_t:
-        t = np.asarray(b_mean)[None, :] - R @ np.asarray(a_mean)
-    elif a_ref is not None:
-        t = X[:, 9:12] + (M - R) @ np.asarray(a_ref, dtype=np.float64)
-    else:
-        t = X[:, 9:12]
-    F = np.zeros((24, 4, 4))
-    F[:, :3, :3] = R
-    F[:, :3, 3] = t
-    F[:, 3, 3] = 1.0
-    dT = invert(F) @ F_hat  # T(x') T̂⁻¹ = F(x')⁻¹ F̂
-    xi = _vee_first_order(dT)
-    J = ((xi[:12] - xi[12:]) / (2.0 * h[:, None])).T  # (6, 12)
-    C = J @ P @ J.T
-    if refit_t and b_mean_cov is not None:
-        R_hat = F_hat[:3, :3]
-        C[:3, :3] += R_hat.T @ np.asarray(b_mean_cov, dtype=np.float64) @ R_hat
-    return 0.5 * (C + C.T)
-
-
-def residual_covariance(
-    T_target_source: np.ndarray, src_used: np.ndarray, tgt_used: np.ndarray
-) -> np.ndarray | None:
-    """Gauss–Newton twist covariance of ``T_target_source`` from point residuals.
-
-    Model ``a_i = exp(δξ^) T̂ b_i + e_i`` (left perturbation, target frame), Jacobian
-    ``J_i = [I₃, −[T̂ b_i]×]``, isotropic noise ``σ² = Σ‖e_i‖² / (3n − 6)`` estimated from the
-    residuals: ``C = σ² (Σ J_iᵀ J_i)⁻¹``. Exact correspondences give ``C = 0`` (honest: no
-    residual). Returns None when ``n ≤ 2`` or the normal matrix is singular.
-    """
-    n = src_used.shape[0]
-    if n <= 2:
-        return None
-    q = transform_points(T_target_source, src_used)
-    e = tgt_used - q
-    dof = max(3 * n - 6, 1)
-    sigma2 = float(np.sum(e * e)) / dof
-    qs = q.sum(axis=0)
-    A = np.zeros((6, 6))
-    A[:3, :3] = n * np.eye(3)
-    A[:3, 3:] = -hat(qs)
-    A[3:, :3] = hat(qs)
-    A[3:, 3:] = np.sum(q * q) * np.eye(3) - q.T @ q  # Σ [q]×ᵀ[q]× = Σ (|q|² I − q qᵀ)
-    if not np.isfinite(A).all():
-        return None
-    lam, V = np.linalg.eigh(A)
-    if not lam[0] > 1e-14 * lam[-1]:
-        return None
-    C = (V / lam) @ V.T * sigma2
-    return 0.5 * (C + C.T)
-
-
 # ---------------------------------------------------------------------------------------------
 # numba helpers for the 12-state updates (H_u = hs·[I₃ ⊗ aᵀ, I₃])
 # ---------------------------------------------------------------------------------------------
-
-
-@njit(cache=True)
-def _h_apply(x: np.ndarray, a: np.ndarray, hs: float, out: np.ndarray) -> None:
-    """``out = H x`` (3,) with ``H = hs·[I₃ ⊗ aᵀ, I₃]``."""
-    for i in range(3):
-        out[i] = hs * (x[3 * i] * a[0] + x[3 * i + 1] * a[1] + x[3 * i + 2] * a[2] + x[9 + i])
-
-
-@njit(cache=True)
-def _ht_apply(e: np.ndarray, a: np.ndarray, hs: float, out: np.ndarray) -> None:
-    """``out = Hᵀ e`` (12,)."""
-    for i in range(3):
-        for j in range(3):
-            out[3 * i + j] = hs * a[j] * e[i]
-        out[9 + i] = hs * e[i]
-
-
-@njit(cache=True)
-def _p_ht(P: np.ndarray, a: np.ndarray, hs: float, out: np.ndarray) -> None:
-    """``out = P Hᵀ`` (12, 3) for a (12, 12) matrix ``P`` (any, not only symmetric)."""
-    for r in range(12):
-        for i in range(3):
-            out[r, i] = hs * (
-                P[r, 3 * i] * a[0] + P[r, 3 * i + 1] * a[1] + P[r, 3 * i + 2] * a[2] + P[r, 9 + i]
-            )
-
-
-@njit(cache=True)
-def _inv3(S: np.ndarray, out: np.ndarray) -> bool:
-    """Inverse of a 3×3 matrix by cofactors; False if (near) singular."""
-    c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
-    c01 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
-    c02 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
-    det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
-    if not (abs(det) > 1e-300):
-        return False
-    inv = 1.0 / det
-    out[0, 0] = c00 * inv
-    out[1, 0] = c01 * inv
-    out[2, 0] = c02 * inv
-    out[0, 1] = (S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]) * inv
-    out[1, 1] = (S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]) * inv
-    out[2, 1] = (S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]) * inv
-    out[0, 2] = (S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]) * inv
-    out[1, 2] = (S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]) * inv
-    out[2, 2] = (S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]) * inv
-    return True
-
-
-@njit(cache=True)
-def _cholesky(A: np.ndarray, L: np.ndarray) -> bool:
-    """Lower Cholesky factor of a symmetric matrix; False if not positive definite."""
-    n = A.shape[0]
-    for i in range(n):
-        for j in range(i + 1):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            if i == j:
-                if not (s > 0.0):
-                    return False
-                L[i, i] = np.sqrt(s)
-            else:
-                L[i, j] = s / L[j, j]
-        for j in range(i + 1, n):
-            L[i, j] = 0.0
-    return True
-
-
-@njit(cache=True)
-def _spd_inverse(A: np.ndarray, L: np.ndarray, out: np.ndarray, Linv: np.ndarray) -> bool:
-    """Inverse of a symmetric positive-definite matrix via Cholesky; False if not SPD.
-
-    ``L`` and ``Linv`` are (n, n) workspaces (``Linv`` receives ``L⁻¹``, lower triangular).
-    """
-    n = A.shape[0]
-    if not _cholesky(A, L):
-        return False
-    # Linv = L⁻¹ (lower), then out = Linvᵀ Linv
-    for i in range(n):
-        for j in range(i + 1, n):
-            Linv[i, j] = 0.0
-    for i in range(n):
-        Linv[i, i] = 1.0 / L[i, i]
-        for j in range(i):
-            s = 0.0
-            for k in range(j, i):
-                s -= L[i, k] * Linv[k, j]
-            Linv[i, j] = s / L[i, i]
-    for i in range(n):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(i, n):
-                s += Linv[k, i] * Linv[k, j]
-            out[i, j] = s
-            out[j, i] = s
-    return True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -859,133 +445,3 @@ class RecursiveEstimator:
 # ---------------------------------------------------------------------------------------------
 # Shared NLMS-type kernel (coherent αβ and SDRE)
 # ---------------------------------------------------------------------------------------------
-
-
-def nlms_options(
-    name: str, paper_literal: bool, average: bool | None, normalise: str | None
-) -> tuple[bool, str]:
-    """Resolve the ``average`` and ``normalise`` options of the NLMS filters (αβ, SDRE).
-
-    Defaults: the coherent reading averages the sweeps and normalises over the set;
-    ``paper_literal`` keeps one sweep's last iterate and the per-sample normaliser.
-    """
-    avg = (not paper_literal) if average is None else bool(average)
-    if normalise is None:
-        normalise = "sample" if paper_literal else "set"
-    if normalise not in ("set", "sample"):
-        raise ConfigError(f"{name}: normalise must be 'set' or 'sample', got {normalise!r}")
-    return avg, normalise
-
-
-def run_nlms(
-    x: np.ndarray,
-    v: np.ndarray,
-    A: np.ndarray,
-    B: np.ndarray,
-    alpha: np.ndarray,
-    beta: np.ndarray,
-    hs: np.ndarray,
-    dt: float,
-    n_passes: int,
-    tol: float,
-    average: bool,
-    normalise: str,
-) -> tuple[int, float]:
-    """The NLMS-type sweeps of αβ and SDRE, in place on ``x`` (12,) and ``v`` (12,).
-
-    ``normalise="sample"``: the per-sample NLMS step ``H_u⁺ e = H_uᵀ e / (hs_u² (‖a_u‖² + 1))``.
-    ``"set"`` **[interpretation]**: the same update in coordinates whitened by the used points'
-    scatter ``C = L Lᵀ`` (``ã = L⁻¹ a``, rotation block ``R̂ L``), with ONE normaliser for the
-    whole set, ``max_u ‖ã_u‖² + 1``. Every update is still a contraction for ``α_u < 2``, but the
-    sweeps' fixed point weights each match by its gain ``α_u`` only — the per-sample normaliser
-    also weights it by ``1/(‖a_u‖² + 1)``, i.e. it discounts the points far from the centroid,
-    which carry the rotation — and whitening makes every direction converge at the same rate.
-    """
-    if normalise == "sample" or A.shape[0] < 4:
-        return _nlms_kernel(x, v, A, B, alpha, beta, hs, dt, n_passes, tol, average, 0.0)
-    C = A.T @ A / A.shape[0]
-    lam, V = np.linalg.eigh(C)
-    if not lam[0] > 1e-12 * max(lam[-1], 1e-300):
-        return _nlms_kernel(x, v, A, B, alpha, beta, hs, dt, n_passes, tol, average, 0.0)
-    L = V * np.sqrt(lam)  # C = L Lᵀ
-    Li = (V / np.sqrt(lam)).T  # L⁻¹
-    Aw = np.ascontiguousarray(A @ Li.T)
-    G = np.eye(12)  # x_w = G x : rotation rows R̂ → R̂ L
-    Gi = np.eye(12)
-    for i in range(3):
-        G[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = L.T
-        Gi[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = Li.T
-    xw = G @ x
-    vw = G @ v
-    den = float((hs.max() ** 2) * ((Aw * Aw).sum(axis=1).max() + 1.0))
-    passes, step = _nlms_kernel(xw, vw, Aw, B, alpha, beta, hs, dt, n_passes, tol, average, den)
-    x[:] = Gi @ xw
-    v[:] = Gi @ vw
-    return passes, step
-
-
-@njit(cache=True)
-def _nlms_kernel(
-    x: np.ndarray,
-    v: np.ndarray,
-    A: np.ndarray,
-    B: np.ndarray,
-    alpha: np.ndarray,
-    beta: np.ndarray,
-    hs: np.ndarray,
-    dt: float,
-    n_passes: int,
-    tol: float,
-    average: bool,
-    den_set: float = 0.0,
-) -> tuple[int, float]:
-    """In place: ``x⁻ = x + dt v; r = H⁺(ψ − H x⁻); x = x⁻ + α_u r; v += (β_u/dt) r``.
-
-    ``H = hs_u·[I₃ ⊗ aᵀ, I₃]`` so ``H⁺ = [I₃ ⊗ a, I₃]ᵀ / (hs_u (‖a‖² + 1))`` (minimum-norm
-    state-space residual); ``den_set > 0`` replaces the per-sample normaliser
-    ``hs_u² (‖a_u‖² + 1)`` by that constant. With ``average`` the sweep's output is the mean of
-    its ``n`` iterates (the filter itself continues from its last iterate) and convergence is
-    tested on that mean. Returns (passes run, 2-norm of the output's change over the last
-    pass); ``x`` holds the output.
-    """
-    n = A.shape[0]
-    hx = np.empty(3)
-    e = np.empty(3)
-    r = np.empty(12)
-    xs = np.empty(12)
-    xo = x.copy()
-    xsum = np.empty(12)
-    step = 0.0
-    passes = 0
-    for _p in range(n_passes):
-        passes += 1
-        xs[:] = xo
-        xsum[:] = 0.0
-        for u in range(n):
-            a = A[u]
-            h = hs[u]
-            for k in range(12):
-                x[k] += dt * v[k]
-            _h_apply(x, a, h, hx)
-            for i in range(3):
-                e[i] = B[u, i] - hx[i]
-            if den_set > 0.0:
-                den = den_set
-            else:
-                den = h * h * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + 1.0)
-            _ht_apply(e, a, h, r)
-            for k in range(12):
-                r[k] /= den
-                x[k] += alpha[u] * r[k]
-                v[k] += beta[u] / dt * r[k]
-                xsum[k] += x[k]
-        for k in range(12):
-            xo[k] = xsum[k] / n if average else x[k]
-        step = 0.0
-        for k in range(12):
-            step += (xo[k] - xs[k]) ** 2
-        step = np.sqrt(step)
-        if step <= tol:
-            break
-    x[:] = xo
-    return passes, step
