@@ -18,11 +18,16 @@ from scipy.spatial import cKDTree
 from relnav.errors import ConfigError, InputError
 from relnav.geometry.local_mesh import delaunay_2d
 from relnav.geometry.neighbors import mean_resolution
+from relnav.geometry.radius_grid import _argsort_d2_idx as _argsort_d2_idx  # numba, old path
 from relnav.geometry.radius_grid import _check_points, _support_csr, radius_search
 from relnav.geometry.radius_grid import _grid_build as _grid_build
 from relnav.geometry.radius_grid import _grid_query as _grid_query
+from relnav.geometry.radius_grid import _group_csr as _group_csr
+from relnav.geometry.radius_grid import _radius_csr_kernel as _radius_csr_kernel
 from relnav.geometry.shot_lrf import SHOT_MIN_NEIGHBORS, shot_lrf
 from relnav.geometry.shot_lrf import _shot_lrf_full as _shot_lrf_full
+from relnav.geometry.shot_lrf import _shot_lrf_kernel as _shot_lrf_kernel
+from relnav.geometry.shot_lrf import _shot_lrf_kernel_csr as _shot_lrf_kernel_csr
 from relnav.geometry.shot_lrf import _shot_lrf_one as _shot_lrf_one
 
 __all__ = ["SHOT_MIN_NEIGHBORS", "radius_search", "rops_lrf", "shot_lrf"]
