@@ -34,12 +34,10 @@ import numpy as np
 
 from relnav.errors import ConfigError
 from relnav.fusion.dynamics import TranslationModel
-from relnav.fusion.ukf import (
+from relnav.fusion.noise import InitialUncertainty, MeasurementNoise, ProcessNoise
+from relnav.fusion.pose_filter import (
     PAPER2_RATE_HZ,
-    InitialUncertainty,
-    MeasurementNoise,
     PoseFilter,
-    ProcessNoise,
     UpdateInfo,
     _canon_q,
     _sym,
