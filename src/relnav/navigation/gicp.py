@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from relnav.registration.icp import _kd_query, _rodrigues_nb
+from relnav.geometry.icp_kernels import _rodrigues_nb
+from relnav.geometry.kdtree import _kd_query
 
 __all__ = ["ScanToMapFit", "solve_scan_to_map"]
 

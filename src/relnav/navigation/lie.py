@@ -13,8 +13,8 @@ import math
 import numpy as np
 from numba import njit
 
+from relnav.geometry.icp_kernels import _rodrigues_nb
 from relnav.navigation.gicp import _rot_log
-from relnav.registration.icp import _rodrigues_nb
 
 __all__ = ["exp_se3", "log_se3"]
 

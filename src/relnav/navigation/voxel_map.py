@@ -26,7 +26,8 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from relnav.registration.icp import _jacobi_eigh, _kd_build
+from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
+from relnav.geometry.kdtree import _kd_build
 
 log = logging.getLogger(__name__)
 
