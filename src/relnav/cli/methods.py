@@ -58,6 +58,13 @@ def methods() -> None:
             avail = f"[yellow]{hint}[/]"
         t.add_row(escape(", ".join(meta["examples"])), escape(meta["description"]), avail)
     console.print(t)
+    from relnav.odometry.budget import DEFAULT_POINT_BUDGET
+
+    console.print(
+        f"Point budget: methods without a [baselines] tag voxel-downsample scans above "
+        f"{DEFAULT_POINT_BUDGET} points first (-O point_budget=N, or None for every point); "
+        "the peers use their own range-based downsampling on scans above 20000 points."
+    )
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")
     for col in ("preset", "expands to", "description"):
         presets.add_column(col)

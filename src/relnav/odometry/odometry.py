@@ -27,6 +27,7 @@ from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
 from relnav.io.pointclouds import ABSURD_COORDINATE
+from relnav.odometry.budget import DEFAULT_POINT_BUDGET, check_point_budget, reduce_to_budget
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.scan import Scan
@@ -58,6 +59,10 @@ class OdometryStep:
         Points in the scan.
     time_s : float
         Wall-clock seconds spent on this frame (preparation + registration).
+    n_used : int or None
+        Points passed to the registration after the point budget (None: not recorded).
+    budget_voxel : float
+        Voxel (m) of the point-budget reduction; 0 when the scan was within the budget.
     """
 
     pose: np.ndarray
@@ -67,6 +72,8 @@ class OdometryStep:
     status: str
     n_points: int
     time_s: float
+    n_used: int | None = None
+    budget_voxel: float = 0.0
 
 
 class Odometry:
@@ -88,6 +95,14 @@ class Odometry:
         rejected (status ``failed``) and the prior is used instead. It protects the chain from
         the occasional wrong registration of a smooth trajectory; it also rejects genuine
         manoeuvres larger than the gate.
+    point_budget : int, None or "auto"
+        Largest scan passed to the method: above it the scan is voxel-downsampled
+        (:func:`relnav.odometry.budget.reduce_to_budget`; voxel and counts in the step and in
+        ``result.info["point_budget"]``); at or below it the scan is passed unchanged.
+        ``"auto"`` (default): :data:`~relnav.odometry.budget.DEFAULT_POINT_BUDGET` for
+        relnav-native methods, none for the peers (``[baselines]`` methods, which downsample
+        with their own settings) and for registration objects. ``None``: no budget (paper 1's
+        literal "describe every vertex" at any density).
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -100,6 +115,7 @@ class Odometry:
         motion_prior: MotionPrior = "constant_velocity",
         gate_rotation_deg: float | None = None,
         gate_translation: float | None = None,
+        point_budget: int | None | str = "auto",
         **method_options: Any,
     ) -> None:
         from relnav.odometry.options import check_odometry_options, parse_initial_pose
@@ -117,6 +133,7 @@ class Odometry:
         self.registration = (
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
+        self.point_budget = _resolve_budget(point_budget, method)
         self.motion_prior: MotionPrior = opts.motion_prior
         g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
         self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
@@ -155,6 +172,8 @@ class Odometry:
                 "misread data?"
             )
         t0 = time.perf_counter()
+        n_raw = len(points)
+        points, budget = reduce_to_budget(points, self.point_budget)
         prepared = None
         prepare_error = ""
         if isinstance(self.registration, PreparedRegistration):
@@ -170,8 +189,10 @@ class Odometry:
                 None,
                 False,
                 "first",
-                len(points),
+                n_raw,
                 time.perf_counter() - t0,
+                len(points),
+                budget.voxel,
             )
         else:
             gap = self._gap + 1  # frames between the previous usable scan and this one
@@ -180,6 +201,14 @@ class Odometry:
                 result = RegistrationResult(status="failed", message="no usable previous scan")
             else:
                 result = self._register(points, prepared, prepare_error, prior)
+            if budget.reduced:
+                result.info["point_budget"] = {
+                    "budget": self.point_budget,
+                    "n_in": budget.n_in,
+                    "n_out": budget.n_out,
+                    "voxel": budget.voxel,
+                }
+                result.timings["budget"] = budget.time_s
             if result.status == "ok":
                 self._check_plausible(result, reach)
             if result.status == "ok":
@@ -209,8 +238,10 @@ class Odometry:
                 result,
                 used_prior,
                 result.status,
-                len(points),
+                n_raw,
                 time.perf_counter() - t0,
+                len(points),
+                budget.voxel,
             )
         self._prev_points = points
         self._prev_prepared = prepared
@@ -301,6 +332,20 @@ class Odometry:
         except Exception as e:  # never let one frame stop the run; flag it
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
+
+def _resolve_budget(budget: int | None | str, method: str | Registration) -> int | None:
+    """The point budget for ``method`` (see :class:`Odometry`); ConfigError if invalid."""
+    if isinstance(budget, str):
+        if budget.strip().lower() != "auto":
+            raise ConfigError(f"point_budget must be an integer, None or 'auto', got {budget!r}")
+        if not isinstance(method, str):
+            return None
+        from relnav.registration.base import available_methods
+
+        meta = available_methods().get(method.partition(":")[0].strip().lower())
+        return DEFAULT_POINT_BUDGET if meta is not None and meta["extra"] is None else None
+    return check_point_budget(budget)
 
 
 def _reach(points: np.ndarray) -> float:

@@ -1,0 +1,192 @@
+"""Point budget: one generic reduction of a dense scan before any relnav-native method.
+
+relnav's own methods (descriptors, GCC, ICP variants, Sparse ICP, Super4PCS) were written for
+paper 1's clouds of 150–3 100 points; several of their stages grow faster than linearly with the
+points (a HoD-S support radius of 80·Tr covers most of a small target, so describing every vertex
+is ~N²). Real sensors give 65 000 (256×256 flash) to 300 000 points (Kinect). Above a budget of
+``B`` points a scan is therefore voxel-downsampled (voxel centroids) before the method sees it;
+at or below the budget it is passed on **unchanged** (same array, bit for bit).
+
+**[interpretation] voxel from the budget and the scene extent.** A scan of a surface holds about
+``A / v²`` voxels of edge ``v`` (``A`` its area), so the first guess is ``v₀ = D / √B`` with
+``D`` the scan's bounding-box diagonal (a surface spanning ``D × D``); it is then corrected with
+the same ``v ∝ √count`` law (at most :data:`MAX_ITERATIONS` voxelisations) until the count is
+within ``[LOW_FRACTION · B, B]`` — never above the budget: the last voxel that gave at most ``B``
+points is kept. Voxel centroids on a grid anchored at the frame origin, in the order each voxel
+is first met in the scan (the same cells and centroids as
+:func:`relnav.features.keypoints.voxel_downsample`, which orders them by cell); ``O(N)`` per
+voxelisation (a numba hash table, no sort). The voxel, the
+counts and the time are recorded in the frame's diagnostics.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from relnav.errors import ConfigError
+
+__all__ = [
+    "DEFAULT_POINT_BUDGET",
+    "BudgetReduction",
+    "check_point_budget",
+    "reduce_to_budget",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_POINT_BUDGET = 5000
+"""Default budget (points per scan) of relnav-native methods **[interpretation]**: above every
+paper-1 cardinality (≤ 3 100 points per scan on average, sim-eoi scans up to ~3 900), so paper
+results do not change, and small enough that HoD-S/GCC stays within a few KISS-ICP frame times
+(``benchmarks/bench_scale.py``)."""
+
+MAX_ITERATIONS = 6
+"""Voxelisations tried at most per scan."""
+
+LOW_FRACTION = 0.7
+"""Accept a voxel as soon as it keeps at least this fraction of the budget (and at most all)."""
+
+
+@dataclass(frozen=True)
+class BudgetReduction:
+    """What the budget did to one scan.
+
+    Attributes
+    ----------
+    n_in, n_out : int
+        Points before and after (``n_out == n_in`` when not reduced).
+    voxel : float
+        Voxel edge used, metres (0 when not reduced).
+    time_s : float
+        Seconds spent (choosing the voxel and downsampling).
+    """
+
+    n_in: int
+    n_out: int
+    voxel: float
+    time_s: float
+
+    @property
+    def reduced(self) -> bool:
+        """True when the scan was downsampled."""
+        return self.voxel > 0
+
+
+def check_point_budget(budget: object) -> int | None:
+    """``None`` (no budget) or an integer ``>= 100``; :class:`ConfigError` otherwise."""
+    if budget is None:
+        return None
+    if isinstance(budget, bool) or not isinstance(budget, int | np.integer):
+        raise ConfigError(f"point_budget must be an integer >= 100 or None, got {budget!r}")
+    if budget < 100:
+        raise ConfigError(f"point_budget must be >= 100 (or None for no budget), got {budget}")
+    return int(budget)
+
+
+_HX, _HY, _HZ = 73856093, 19349663, 83492791
+
+
+@njit(cache=True)
+def _voxelise(P: np.ndarray, voxel: float, centroids: bool) -> tuple[int, np.ndarray]:
+    """Occupied cells ``floor(p / voxel)`` of ``P`` (N, 3) by open addressing (no sort).
+
+    Returns the cell count ``M`` and, when ``centroids``, the (M, 3) centroids in first-met
+    order (else an empty array).
+    """
+    N = P.shape[0]
+    cap = 16
+    while cap < 2 * N:
+        cap *= 2
+    mask = cap - 1
+    keys = np.empty((cap, 3), dtype=np.int64)
+    slot_id = np.full(cap, -1, dtype=np.int64)
+    sums = np.zeros((N if centroids else 0, 3))
+    cnt = np.zeros(N if centroids else 0)
+    M = 0
+    inv = 1.0 / voxel
+    for i in range(N):
+        kx = np.int64(np.floor(P[i, 0] * inv))
+        ky = np.int64(np.floor(P[i, 1] * inv))
+        kz = np.int64(np.floor(P[i, 2] * inv))
+        h = ((kx * _HX) ^ (ky * _HY) ^ (kz * _HZ)) & mask
+        while slot_id[h] >= 0 and not (
+            keys[h, 0] == kx and keys[h, 1] == ky and keys[h, 2] == kz
+        ):
+            h = (h + 1) & mask
+        if slot_id[h] < 0:
+            slot_id[h] = M
+            keys[h, 0] = kx
+            keys[h, 1] = ky
+            keys[h, 2] = kz
+            M += 1
+        if centroids:
+            j = slot_id[h]
+            sums[j, 0] += P[i, 0]
+            sums[j, 1] += P[i, 1]
+            sums[j, 2] += P[i, 2]
+            cnt[j] += 1.0
+    out = np.empty((M if centroids else 0, 3))
+    if centroids:
+        for j in range(M):
+            out[j, 0] = sums[j, 0] / cnt[j]
+            out[j, 1] = sums[j, 1] / cnt[j]
+            out[j, 2] = sums[j, 2] / cnt[j]
+    return M, out
+
+
+def reduce_to_budget(points: np.ndarray, budget: int | None) -> tuple[np.ndarray, BudgetReduction]:
+    """Voxel-downsample ``points`` to at most ``budget`` points (unchanged at or below it).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Scan, sensor frame, metres. Non-finite rows are dropped only when the scan is reduced.
+    budget : int or None
+        Largest point count passed on; ``None`` = no budget.
+
+    Returns
+    -------
+    points : (M, 3) float64
+        ``points`` itself (the same object) when ``N <= budget`` or ``budget`` is None;
+        otherwise voxel centroids, ``M <= budget``.
+    reduction : BudgetReduction
+        Counts, voxel (m) and time (s).
+    """
+    t0 = time.perf_counter()
+    n_in = int(points.shape[0])
+    if budget is None or n_in <= budget:
+        return points, BudgetReduction(n_in, n_in, 0.0, time.perf_counter() - t0)
+    P = np.ascontiguousarray(points[np.isfinite(points).all(axis=1)], dtype=np.float64)
+    if P.shape[0] <= budget:
+        return P, BudgetReduction(n_in, int(P.shape[0]), 0.0, time.perf_counter() - t0)
+    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    if not diag > 0:  # every point at one place: one voxel
+        return P[:1].copy(), BudgetReduction(n_in, 1, float("inf"), time.perf_counter() - t0)
+    v = diag / math.sqrt(budget)
+    best: tuple[float, int] | None = None  # (voxel, count) of the finest voxel within budget
+    for _ in range(MAX_ITERATIONS):
+        m = _voxelise(P, v, False)[0]
+        if m <= budget and (best is None or v < best[0]):
+            best = (v, m)
+        if LOW_FRACTION * budget <= m <= budget:
+            break
+        # surface law count ∝ v⁻²; aim a little under the budget, cap each step's change
+        factor = math.sqrt(m / (0.85 * budget))
+        v *= min(max(factor, 0.5), 4.0)
+    if best is None:  # never got under the budget: keep doubling (terminates: one voxel)
+        while True:
+            v *= 2.0
+            m = _voxelise(P, v, False)[0]
+            if m <= budget:
+                best = (v, m)
+                break
+    out = _voxelise(P, best[0], True)[1]
+    red = BudgetReduction(n_in, int(out.shape[0]), float(best[0]), time.perf_counter() - t0)
+    log.debug("point budget: %d → %d points (voxel %.4g m)", n_in, red.n_out, red.voxel)
+    return out, red
