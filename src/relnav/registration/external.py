@@ -250,7 +250,7 @@ def _max_range(points: np.ndarray) -> float:
     return float(np.sqrt(np.einsum("ij,ij->i", points, points).max())) if points.size else 0.0
 
 
-
+@dataclass
 class _Fit:
     fitness: float = 0.0
     rmse: float = float("nan")
