@@ -27,7 +27,12 @@ from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
 from relnav.io.pointclouds import ABSURD_COORDINATE
-from relnav.odometry.budget import DEFAULT_POINT_BUDGET, check_point_budget, reduce_to_budget
+from relnav.odometry.budget import (
+    DEFAULT_POINT_BUDGET,
+    SAMPLERS,
+    check_point_budget,
+    reduce_to_budget,
+)
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.scan import Scan
@@ -103,6 +108,11 @@ class Odometry:
         relnav-native methods, none for the peers (``[baselines]`` methods, which downsample
         with their own settings) and for registration objects. ``None``: no budget (paper 1's
         literal "describe every vertex" at any density).
+    budget_sampler : {"random", "voxel"}
+        How a scan above the budget is reduced (:mod:`relnav.odometry.budget`: a seeded random
+        subset by default, measured better than voxel centroids).
+    budget_seed : int
+        Seed of the random reduction; frame ``k`` draws with ``default_rng([budget_seed, k])``.
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -115,7 +125,9 @@ class Odometry:
         motion_prior: MotionPrior = "constant_velocity",
         gate_rotation_deg: float | None = None,
         gate_translation: float | None = None,
-        point_budget: int | None | str = "auto",
+        point_budget: int | str | None = "auto",
+        budget_sampler: str = "random",
+        budget_seed: int = 0,
         **method_options: Any,
     ) -> None:
         from relnav.odometry.options import check_odometry_options, parse_initial_pose
@@ -134,6 +146,14 @@ class Odometry:
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
         self.point_budget = _resolve_budget(point_budget, method)
+        if budget_sampler not in SAMPLERS:
+            raise ConfigError(
+                f"budget_sampler must be one of {', '.join(SAMPLERS)}, got {budget_sampler!r}"
+            )
+        self.budget_sampler = budget_sampler
+        if isinstance(budget_seed, bool) or not isinstance(budget_seed, int | np.integer):
+            raise ConfigError(f"budget_seed must be an integer, got {budget_seed!r}")
+        self.budget_seed = int(budget_seed)
         self.motion_prior: MotionPrior = opts.motion_prior
         g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
         self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
@@ -173,7 +193,12 @@ class Odometry:
             )
         t0 = time.perf_counter()
         n_raw = len(points)
-        points, budget = reduce_to_budget(points, self.point_budget)
+        points, budget = reduce_to_budget(
+            points,
+            self.point_budget,
+            sampler=self.budget_sampler,
+            seed=[self.budget_seed, self.n_frames],
+        )
         prepared = None
         prepare_error = ""
         if isinstance(self.registration, PreparedRegistration):
@@ -207,6 +232,8 @@ class Odometry:
                     "n_in": budget.n_in,
                     "n_out": budget.n_out,
                     "voxel": budget.voxel,
+                    "sampler": budget.sampler,
+                    "seed": [self.budget_seed, self.n_frames],
                 }
                 result.timings["budget"] = budget.time_s
             if result.status == "ok":
@@ -334,7 +361,7 @@ class Odometry:
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
 
 
-def _resolve_budget(budget: int | None | str, method: str | Registration) -> int | None:
+def _resolve_budget(budget: int | str | None, method: str | Registration) -> int | None:
     """The point budget for ``method`` (see :class:`Odometry`); ConfigError if invalid."""
     if isinstance(budget, str):
         if budget.strip().lower() != "auto":

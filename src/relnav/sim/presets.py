@@ -319,15 +319,18 @@ def _dense(
 
 def _dense_flash(frames: int, *, resolution: int = 256) -> dict[str, Any]:
     try:
-        r = int(resolution)
+        rf = float(resolution)
     except (TypeError, ValueError):
-        raise ConfigError(f"dense-flash: resolution must be an integer, got {resolution!r}") from None
-    if not 8 <= r <= 2048 or r != resolution:
-        raise ConfigError(f"dense-flash: resolution must be an integer in [8, 2048], got {resolution!r}")
+        rf = float("nan")
+    if not (8 <= rf <= 2048 and rf == int(rf)):
+        raise ConfigError(
+            f"dense-flash: resolution must be an integer in [8, 2048], got {resolution!r}"
+        )
+    r = int(rf)
     sensor = {"preset": "flash256", "name": "lidar"}
     if r != 256:
         sensor["overrides"] = {"rows": r, "cols": r}
-    return _dense(frames, sensor, 5.0, 12.0, f"{r}x{r} flash LIDAR (30 deg)")
+    return _dense(frames, sensor, 7.0, 6.0, f"{r}x{r} flash LIDAR (30 deg)")
 
 
 def _dense_kinect(frames: int) -> dict[str, Any]:
