@@ -28,6 +28,7 @@ from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
 from relnav.io.pointclouds import ABSURD_COORDINATE
 from relnav.odometry.budget import (
+    DEFAULT_BUDGET_TARGET,
     DEFAULT_POINT_BUDGET,
     SAMPLERS,
     check_point_budget,
@@ -108,6 +109,10 @@ class Odometry:
         relnav-native methods, none for the peers (``[baselines]`` methods, which downsample
         with their own settings) and for registration objects. ``None``: no budget (paper 1's
         literal "describe every vertex" at any density).
+    budget_target : int or None
+        Size a scan above the budget is reduced to (default 3 000, capped at the budget;
+        None: the budget itself). See :mod:`relnav.odometry.budget` for why it is smaller than
+        the budget.
     budget_sampler : {"random", "voxel"}
         How a scan above the budget is reduced (:mod:`relnav.odometry.budget`: a seeded random
         subset by default, measured better than voxel centroids).
@@ -126,6 +131,7 @@ class Odometry:
         gate_rotation_deg: float | None = None,
         gate_translation: float | None = None,
         point_budget: int | str | None = "auto",
+        budget_target: int | None = DEFAULT_BUDGET_TARGET,
         budget_sampler: str = "random",
         budget_seed: int = 0,
         **method_options: Any,
@@ -146,6 +152,7 @@ class Odometry:
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
         self.point_budget = _resolve_budget(point_budget, method)
+        self.budget_target = check_point_budget(budget_target, "budget_target")
         if budget_sampler not in SAMPLERS:
             raise ConfigError(
                 f"budget_sampler must be one of {', '.join(SAMPLERS)}, got {budget_sampler!r}"
@@ -196,6 +203,7 @@ class Odometry:
         points, budget = reduce_to_budget(
             points,
             self.point_budget,
+            target=self.budget_target,
             sampler=self.budget_sampler,
             seed=[self.budget_seed, self.n_frames],
         )
@@ -229,6 +237,7 @@ class Odometry:
             if budget.reduced:
                 result.info["point_budget"] = {
                     "budget": self.point_budget,
+                    "target": self.budget_target,
                     "n_in": budget.n_in,
                     "n_out": budget.n_out,
                     "voxel": budget.voxel,
