@@ -117,6 +117,7 @@ def test_native_methods_get_the_budget_and_peers_do_not():
     assert Odometry("icp-point").point_budget == DEFAULT_POINT_BUDGET
     assert Odometry("feature:hods+gcc+svd").budget_target == DEFAULT_BUDGET_TARGET
     assert Odometry("icp-point", point_budget=None).point_budget is None
+    assert Odometry("icp-point", point_budget="None").point_budget is None  # -O on the CLI
     pytest.importorskip("kiss_icp")
     assert Odometry("kiss-icp").point_budget is None
 

@@ -152,7 +152,10 @@ class Odometry:
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
         self.point_budget = _resolve_budget(point_budget, method)
-        self.budget_target = check_point_budget(budget_target, "budget_target")
+        self.budget_target = check_point_budget(
+            None if str(budget_target).strip().lower() in ("none", "null") else budget_target,
+            "budget_target",
+        )
         if budget_sampler not in SAMPLERS:
             raise ConfigError(
                 f"budget_sampler must be one of {', '.join(SAMPLERS)}, got {budget_sampler!r}"
@@ -372,6 +375,8 @@ class Odometry:
 
 def _resolve_budget(budget: int | str | None, method: str | Registration) -> int | None:
     """The point budget for ``method`` (see :class:`Odometry`); ConfigError if invalid."""
+    if isinstance(budget, str) and budget.strip().lower() in ("none", "null"):
+        return None  # the command line's -O point_budget=None
     if isinstance(budget, str):
         if budget.strip().lower() != "auto":
             raise ConfigError(f"point_budget must be an integer, None or 'auto', got {budget!r}")
