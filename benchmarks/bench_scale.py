@@ -12,8 +12,8 @@ filling most of the field of view):
 
 Each (method, scene) runs in its own subprocess (``--worker``) through
 :func:`relnav.odometry.run_sequence` with the ground truth's first pose, so the peak memory is
-that process's ``ru_maxrss`` (Python, libraries, the scans and the method; an idle worker that
-only imports and loads the scans is printed as ``baseline``). Printed per method and scene:
+that process's high-water resident memory (``VmHWM``: Python, libraries, the scans and the
+method; an idle worker that only imports and loads the scans is printed as ``baseline``). Printed per method and scene:
 median ms per frame (registered frames, the first excluded: numba compilation and cache
 loading), peak MB, RPE (δ = 1 frame, translation RMSE mm and rotation RMSE deg, evo's
 definition via :func:`relnav.eval.metrics.compute_metrics`), frames flagged, and the time as a
@@ -71,6 +71,21 @@ def scenes() -> list[tuple[str, str, dict]]:
 # ------------------------------------------------------------------------------------ worker
 
 
+def peak_rss_mb() -> float:
+    """Peak resident memory of THIS process image, MB: ``VmHWM`` of ``/proc/self/status``.
+
+    ``ru_maxrss`` is not used: on Linux it survives ``exec`` and so includes the driver's
+    memory at fork time. Falls back to ``ru_maxrss`` where ``/proc`` is absent.
+    """
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def worker(method: str, folder: str) -> None:
     """Run one method on one simulated sequence; print one JSON line."""
     from relnav.eval.metrics import compute_metrics
@@ -81,8 +96,7 @@ def worker(method: str, folder: str) -> None:
     scans = [seq[k] for k in range(len(seq))]  # all in memory, as a sensor stream would be
     gt = np.asarray(seq.gt_poses)
     if method == "baseline":
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-        print(json.dumps({"peak_mb": rss}))
+        print(json.dumps({"peak_mb": peak_rss_mb()}))
         return
     run = run_sequence(scans, method, initial_pose=gt[0])
     steps = run.steps
@@ -93,7 +107,7 @@ def worker(method: str, folder: str) -> None:
         json.dumps(
             {
                 "ms": 1000.0 * float(np.median(times)),
-                "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+                "peak_mb": peak_rss_mb(),
                 "rpe_mm": 1000.0 * float(m["rpe_trans_rmse"]),
                 "rpe_deg": float(m["rpe_rot_rmse_deg"]),
                 "flagged": int(run.n_flagged),
