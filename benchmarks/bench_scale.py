@@ -14,15 +14,16 @@ Each (method, scene) runs in its own subprocess (``--worker``) through
 :func:`relnav.odometry.run_sequence` with the ground truth's first pose, so the peak memory is
 that process's high-water resident memory (``VmHWM``: Python, libraries, the scans and the
 method; an idle worker that only imports and loads the scans is printed as ``baseline``).
-Printed per method and scene: median ms per frame (registered frames, the first excluded: numba
-compilation and cache loading), peak MB, RPE (δ = 1 frame, translation RMSE mm and rotation RMSE deg, evo's
-definition via :func:`relnav.eval.metrics.compute_metrics`), frames flagged, and the time as a
-ratio to KISS-ICP's in the same run. Last, per method, the exponent ``b`` of a least-squares fit
-``ms ∝ n^b`` over the ladder scenes above the method's point budget (relnav-native methods:
-:data:`relnav.odometry.budget.DEFAULT_POINT_BUDGET`; the navigator: its ``max_points``).
+Printed per method and scene: median ms per frame (registered frames, the first excluded:
+numba compilation and cache loading), peak MB, RPE (δ = 1 frame, translation RMSE mm and
+rotation RMSE deg, evo's definition via :func:`relnav.eval.metrics.compute_metrics`), frames
+flagged, and the time as a ratio to KISS-ICP's in the same run. Last, per method, the exponent
+``b`` of a least-squares fit ``ms ∝ n^b`` over the ladder scenes above the method's point budget
+(relnav-native methods: :data:`relnav.odometry.budget.DEFAULT_POINT_BUDGET`; the navigator: its
+``max_points``). With the default 8 frames the median is over 6 timed frames.
 
 Run:  ``nice -n 10 python benchmarks/bench_scale.py [--frames 12] [--methods a,b] [--scenes x,y]``
-(≈ 20 min on a shared 2-core machine with the defaults). Seeds: scenario seed 0.
+(≈ 13 min on a shared 2-core machine with --frames 8). Seeds: scenario seed 0.
 """
 
 from __future__ import annotations
