@@ -65,7 +65,7 @@ def methods() -> None:
         f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
         "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
         "every point); the navigator keeps max_points; the peers use their own range-based "
-        "downsampling on scans above 20000 points."
+        "downsampling on scans above 5000 points."
     )
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")
     for col in ("preset", "expands to", "description"):

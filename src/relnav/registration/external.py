@@ -22,13 +22,13 @@ distance, :func:`relnav.geometry.neighbors.mean_resolution`; KISS-ICP uses the t
 when it builds its pipeline) and from the clouds' ranges. Every factor is an option, and the
 values actually used are recorded in ``result.info``.
 
-**Dense scans** (more than ``dense_points`` points, default 20 000: real sensors, not paper 1's
-clouds): KISS-ICP and small_gicp then use their own recommended, range-based downsampling,
-which is what makes them fast on such scans — KISS-ICP's voxel ``max_range / 100`` (its
-default when no voxel is given), small_gicp's ``0.25 m`` downsampling and ``1 m`` gate of its
-100 m-range examples scaled to the scan (``max range / 400`` and ``4 ×`` that)
-**[interpretation]**. ``info["settings"]`` says which (``"sparse"``: ``Tr``-based,
-``"dense"``: range-based); ``relnav methods`` lists the rule.
+**Dense scans** (more than ``dense_points`` points, default 5 000 as the point budget of relnav's
+own methods: real sensors, not paper 1's clouds, which all have fewer): KISS-ICP and small_gicp
+then use their own recommended, range-based downsampling, which is what makes them fast on such
+scans — KISS-ICP's voxel ``max_range / 100`` (its default when no voxel is given), small_gicp's
+``0.25 m`` downsampling and ``1 m`` gate of its 100 m-range examples scaled to the scan
+(``max range / 400`` and ``4 ×`` that) **[interpretation]**. ``info["settings"]`` says which
+(``"sparse"``: ``Tr``-based, ``"dense"``: range-based); ``relnav methods`` lists the rule.
 
 **KISS-ICP statefulness.** KISS-ICP registers each new frame against a local voxel map of the
 previous frames, with a constant-velocity prediction and an adaptive correspondence threshold.
@@ -230,7 +230,7 @@ def _information(
 
 # --------------------------------------------------------------------------- dense scans
 
-DENSE_POINTS = 20_000
+DENSE_POINTS = 5_000
 """Scans with more points get the peers' own range-based downsampling (module docstring)."""
 
 
@@ -1342,7 +1342,7 @@ def _make_o3d_plane(spec: str | None, **options: Any) -> Open3DICP:
 @register_method(
     "kiss-icp",
     "KISS-ICP odometry (local voxel map, adaptive threshold); voxel = Tr (sparse scans) or "
-    "max_range/100, KISS-ICP's own rule (scans > 20k points)",
+    "max_range/100, KISS-ICP's own rule (scans > 5000 points)",
     extra="baselines",
     examples=["kiss-icp"],
 )
@@ -1354,7 +1354,7 @@ def _make_kiss(spec: str | None, **options: Any) -> KissICPRegistration:
 @register_method(
     "small-gicp",
     "small_gicp align (GICP; spec icp|plane_icp|vgicp), covariance from H; downsampling Tr "
-    "(sparse scans) or range/400, gate 4x (small_gicp's 0.25/1 m at 100 m; scans > 20k points)",
+    "(sparse scans) or range/400, gate 4x (small_gicp's 0.25/1 m at 100 m; scans > 5000 points)",
     extra="baselines",
     examples=["small-gicp", "small-gicp:vgicp", "small-gicp:plane_icp"],
 )
