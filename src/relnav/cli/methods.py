@@ -61,11 +61,13 @@ def methods() -> None:
     from relnav.odometry.budget import DEFAULT_BUDGET_TARGET, DEFAULT_POINT_BUDGET
 
     console.print(
-        f"Point budget: pairwise methods without a [baselines] tag get scans above "
-        f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
-        "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
-        "every point); the navigator keeps max_points; the peers use their own range-based "
-        "downsampling on scans above 5000 points."
+        escape(
+            f"Point budget: pairwise methods without a [baselines] tag get scans above "
+            f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
+            "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
+            "every point); the navigator keeps max_points; the peers use their own range-based "
+            "downsampling on scans above 5000 points."
+        )
     )
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")
     for col in ("preset", "expands to", "description"):
