@@ -58,6 +58,17 @@ def methods() -> None:
             avail = f"[yellow]{hint}[/]"
         t.add_row(escape(", ".join(meta["examples"])), escape(meta["description"]), avail)
     console.print(t)
+    from relnav.odometry.budget import DEFAULT_BUDGET_TARGET, DEFAULT_POINT_BUDGET
+
+    console.print(
+        escape(
+            f"Point budget: pairwise methods without a [baselines] tag get scans above "
+            f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
+            "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
+            "every point); the navigator keeps max_points; the peers use their own range-based "
+            "downsampling on scans above 5000 points."
+        )
+    )
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")
     for col in ("preset", "expands to", "description"):
         presets.add_column(col)

@@ -191,7 +191,8 @@ def odometry(
         help="Method option key=value (repeatable; dots nest: estimator_options.alpha=0.3). "
         "Odometry options: motion_prior, initial_pose (gt | identity | 16 numbers), "
         "gate_rotation_deg, gate_translation, step_check (auto | off | referee | backward | "
-        "full), step_tolerance_m, step_tolerance_deg.",
+        "full), step_tolerance_m, step_tolerance_deg, point_budget (None = every point), "
+        "budget_target, budget_sampler (random | voxel), budget_seed.",
     ),
     strict: bool = typer.Option(
         False, "--strict", help="Abort on an unreadable scan (default: flag the frame, go on)."

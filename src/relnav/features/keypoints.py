@@ -29,6 +29,7 @@ __all__ = [
     "iss_keypoints",
     "select_keypoints",
     "voxel_downsample",
+    "voxel_groups",
     "voxel_keypoints",
 ]
 
@@ -55,12 +56,21 @@ def _check_voxel(voxel_size: float | None) -> float:
     return v
 
 
-def _voxel_groups(P: np.ndarray, voxel: float) -> tuple[np.ndarray, int]:
+def voxel_groups(P: np.ndarray, voxel: float) -> tuple[np.ndarray, int]:
     """Voxel id of each point (``0..M-1``, ordered by voxel key) and the voxel count ``M``."""
+    if P.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), 0
     keys = np.floor(P / voxel).astype(np.int64)
-    _, inv = np.unique(keys, axis=0, return_inverse=True)
+    c = keys - keys.min(axis=0)
+    span = c.max(axis=0) + 1
+    if float(span[0]) * float(span[1]) * float(span[2]) < 2.0**62:
+        # one int64 key per cell, mixed radix: same (lexicographic) order as the rows, and a
+        # 1-D sort instead of a row-wise one (several times faster on dense scans)
+        _, inv = np.unique((c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2], return_inverse=True)
+    else:
+        _, inv = np.unique(keys, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
-    return inv, int(inv.max()) + 1 if inv.size else 0
+    return inv, int(inv.max()) + 1
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
@@ -82,7 +92,7 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
     v = _check_voxel(voxel_size)
     if P.shape[0] == 0:
         return np.zeros((0, 3))
-    inv, M = _voxel_groups(P, v)
+    inv, M = voxel_groups(P, v)
     counts = np.bincount(inv, minlength=M).astype(np.float64)
     return (
         np.stack([np.bincount(inv, weights=P[:, a], minlength=M) for a in range(3)], 1)
@@ -96,7 +106,7 @@ def voxel_keypoints(points: np.ndarray, voxel_size: float) -> np.ndarray:
     v = _check_voxel(voxel_size)
     if P.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    inv, M = _voxel_groups(P, v)
+    inv, M = voxel_groups(P, v)
     counts = np.bincount(inv, minlength=M).astype(np.float64)
     cen = np.stack([np.bincount(inv, weights=P[:, a], minlength=M) for a in range(3)], 1)
     cen /= counts[:, None]

@@ -32,6 +32,13 @@ from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import invert
 from relnav.io.pointclouds import ABSURD_COORDINATE
+from relnav.odometry.budget import (
+    DEFAULT_BUDGET_TARGET,
+    DEFAULT_POINT_BUDGET,
+    SAMPLERS,
+    check_point_budget,
+    reduce_to_budget,
+)
 from relnav.registration.base import PreparedRegistration, Registration, get_registration
 from relnav.registration.result import RegistrationResult
 from relnav.scan import Scan
@@ -64,6 +71,10 @@ class OdometryStep:
         Points in the scan.
     time_s : float
         Wall-clock seconds spent on this frame (preparation + registration).
+    n_used : int or None
+        Points passed to the registration after the point budget (None: not recorded).
+    budget_voxel : float
+        Voxel (m) of the point-budget reduction; 0 when the scan was within the budget.
     """
 
     pose: np.ndarray
@@ -73,6 +84,8 @@ class OdometryStep:
     status: str
     n_points: int
     time_s: float
+    n_used: int | None = None
+    budget_voxel: float = 0.0
 
 
 class Odometry:
@@ -102,6 +115,23 @@ class Odometry:
         methods and for registration objects).
     step_tolerance_m, step_tolerance_deg : float
         Accuracy a step must have to stay ``ok`` (m, degrees; default 0.5 m, 5°).
+    point_budget : int, None or "auto"
+        Largest scan passed to the method: above it the scan is voxel-downsampled
+        (:func:`relnav.odometry.budget.reduce_to_budget`; voxel and counts in the step and in
+        ``result.info["point_budget"]``); at or below it the scan is passed unchanged.
+        ``"auto"`` (default): :data:`~relnav.odometry.budget.DEFAULT_POINT_BUDGET` for
+        relnav-native methods, none for the peers (``[baselines]`` methods, which downsample
+        with their own settings) and for registration objects. ``None``: no budget (paper 1's
+        literal "describe every vertex" at any density).
+    budget_target : int or None
+        Size a scan above the budget is reduced to (default 3 000, capped at the budget;
+        None: the budget itself). See :mod:`relnav.odometry.budget` for why it is smaller than
+        the budget.
+    budget_sampler : {"random", "voxel"}
+        How a scan above the budget is reduced (:mod:`relnav.odometry.budget`: a seeded random
+        subset by default, measured better than voxel centroids).
+    budget_seed : int
+        Seed of the random reduction; frame ``k`` draws with ``default_rng([budget_seed, k])``.
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -117,6 +147,10 @@ class Odometry:
         step_check: str | bool = "auto",
         step_tolerance_m: float = 0.5,
         step_tolerance_deg: float = 5.0,
+        point_budget: int | str | None = "auto",
+        budget_target: int | None = DEFAULT_BUDGET_TARGET,
+        budget_sampler: str = "random",
+        budget_seed: int = 0,
         **method_options: Any,
     ) -> None:
         from relnav.odometry.options import check_odometry_options, parse_initial_pose
@@ -146,6 +180,19 @@ class Odometry:
                 tolerance_deg=_number("step_tolerance_deg", step_tolerance_deg),
             )
         )
+        self.point_budget = _resolve_budget(point_budget, method)
+        self.budget_target = check_point_budget(
+            None if str(budget_target).strip().lower() in ("none", "null") else budget_target,
+            "budget_target",
+        )
+        if budget_sampler not in SAMPLERS:
+            raise ConfigError(
+                f"budget_sampler must be one of {', '.join(SAMPLERS)}, got {budget_sampler!r}"
+            )
+        self.budget_sampler = budget_sampler
+        if isinstance(budget_seed, bool) or not isinstance(budget_seed, int | np.integer):
+            raise ConfigError(f"budget_seed must be an integer, got {budget_seed!r}")
+        self.budget_seed = int(budget_seed)
         self.motion_prior: MotionPrior = opts.motion_prior
         g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
         self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
@@ -185,6 +232,14 @@ class Odometry:
                 "misread data?"
             )
         t0 = time.perf_counter()
+        n_raw = len(points)
+        points, budget = reduce_to_budget(
+            points,
+            self.point_budget,
+            target=self.budget_target,
+            sampler=self.budget_sampler,
+            seed=[self.budget_seed, self.n_frames],
+        )
         prepared = None
         prepare_error = ""
         if isinstance(self.registration, PreparedRegistration):
@@ -203,8 +258,10 @@ class Odometry:
                 None,
                 False,
                 "first",
-                len(points),
+                n_raw,
                 time.perf_counter() - t0,
+                len(points),
+                budget.voxel,
             )
         else:
             gap = self._gap + 1  # frames between the previous usable scan and this one
@@ -213,6 +270,17 @@ class Odometry:
                 result = RegistrationResult(status="failed", message="no usable previous scan")
             else:
                 result = self._register(points, prepared, prepare_error, prior)
+            if budget.reduced:
+                result.info["point_budget"] = {
+                    "budget": self.point_budget,
+                    "target": self.budget_target,
+                    "n_in": budget.n_in,
+                    "n_out": budget.n_out,
+                    "voxel": budget.voxel,
+                    "sampler": budget.sampler,
+                    "seed": [self.budget_seed, self.n_frames],
+                }
+                result.timings["budget"] = budget.time_s
             if result.status == "ok":
                 self._check_plausible(result, reach)
             if result.status == "ok":
@@ -252,8 +320,10 @@ class Odometry:
                 result,
                 used_prior,
                 result.status,
-                len(points),
+                n_raw,
                 time.perf_counter() - t0,
+                len(points),
+                budget.voxel,
             )
         self._prev_points = points
         self._prev_prepared = prepared
@@ -356,6 +426,22 @@ def _number(name: str, value: Any) -> float:
     if isinstance(value, bool) or not (np.isfinite(v) and v > 0):
         raise ConfigError(f"{name} must be a positive number, got {value!r}")
     return v
+
+
+def _resolve_budget(budget: int | str | None, method: str | Registration) -> int | None:
+    """The point budget for ``method`` (see :class:`Odometry`); ConfigError if invalid."""
+    if isinstance(budget, str) and budget.strip().lower() in ("none", "null"):
+        return None  # the command line's -O point_budget=None
+    if isinstance(budget, str):
+        if budget.strip().lower() != "auto":
+            raise ConfigError(f"point_budget must be an integer, None or 'auto', got {budget!r}")
+        if not isinstance(method, str):
+            return None
+        from relnav.registration.base import available_methods
+
+        meta = available_methods().get(method.partition(":")[0].strip().lower())
+        return DEFAULT_POINT_BUDGET if meta is not None and meta["extra"] is None else None
+    return check_point_budget(budget)
 
 
 def _reach(points: np.ndarray) -> float:

@@ -53,6 +53,21 @@ Paper 2 (cross-source fusion, Tables 2–5):
     +2° … −24.9° beam fan is level with the target **[interpretation: Paper 2 raised its LIDAR
     on a lifting platform]**.
 
+Dense sensors (issue 13, ``benchmarks/bench_scale.py``): a satellite (``iridium``) spinning at
+2°/s about a tilted axis in front of a static sensor, 30 frames at 1 s, the target filling most
+of the field of view **[interpretation: close-range inspection; sizes and distances chosen for
+the point counts]**:
+
+``dense-flash``
+    256×256 flash LIDAR (``flash256``, 30°×30°) at 7 m from a 6 m target (≈ 45 000 points);
+    option ``resolution`` (pixels per side, 8–2048) sweeps the density on the same scene.
+``dense-kinect``
+    Kinect v1 at full 640×480 resolution, 1.7 m from a 4 m target (≈ 150 000–190 000 points).
+``dense-hdl64``
+    HDL-64 (360°, 64 beams) 2.5 m from a 20 m target (≈ 30 000–50 000 points: a target on one
+    side fills at most half of the 360° scan, so ~65 000 is a hard ceiling for a free-flying
+    target; HDL-64's ~120 000 points need a surrounding scene).
+
 Every preset accepts ``frames``, ``seed``, ``target_mesh`` (any mesh path replaces the
 procedural target; the preset's ``scale_to`` is kept unless ``scale_to`` is given, ``None``
 scale keeps the file's units) and ``scale_to``. Changing ``frames`` keeps the path and the
@@ -279,6 +294,56 @@ def _li_rotating(frames: int, *, distance: float = 3.0, axis: str = "z") -> dict
 
 
 # --------------------------------------------------------------------------------------------
+# dense sensors (issue 13: scale benchmark)
+# --------------------------------------------------------------------------------------------
+
+_DENSE_SPIN = {"kind": "spin", "axis": (0.3, 0.2, 1.0), "rate_deg_s": 2.0}
+"""Slow spin of the target about a tilted axis: 2° per 1 s frame (a 0.1–0.2 m arc of the
+sensor relative to the target at these ranges)."""
+
+
+def _dense(
+    frames: int, sensor: dict[str, Any], distance: float, scale: float, what: str
+) -> dict[str, Any]:
+    return dict(
+        description=f"Dense sensor: {what}; satellite (iridium, {scale:g} m) spinning "
+        f"2 deg/s about a tilted axis at {distance:g} m, static sensor",
+        frames=frames,
+        dt=1.0,
+        target={"name": "iridium", "scale_to": scale},
+        sensors=[sensor],
+        trajectory={"kind": "static", "params": {"position": (-distance, 0.0, 0.15 * distance)}},
+        attitude=_DENSE_SPIN,
+    )
+
+
+def _dense_flash(frames: int, *, resolution: int = 256) -> dict[str, Any]:
+    try:
+        rf = float(resolution)
+    except (TypeError, ValueError):
+        rf = float("nan")
+    if not (8 <= rf <= 2048 and rf == int(rf)):
+        raise ConfigError(
+            f"dense-flash: resolution must be an integer in [8, 2048], got {resolution!r}"
+        )
+    r = int(rf)
+    sensor = {"preset": "flash256", "name": "lidar"}
+    if r != 256:
+        sensor["overrides"] = {"rows": r, "cols": r}
+    return _dense(frames, sensor, 7.0, 6.0, f"{r}x{r} flash LIDAR (30 deg)")
+
+
+def _dense_kinect(frames: int) -> dict[str, Any]:
+    return _dense(
+        frames, {"preset": "kinect1", "name": "kinect"}, 1.7, 4.0, "Kinect v1 640x480 depth"
+    )
+
+
+def _dense_hdl64(frames: int) -> dict[str, Any]:
+    return _dense(frames, {"preset": "hdl64", "name": "lidar"}, 6.0, 40.0, "HDL-64 (360 deg)")
+
+
+# --------------------------------------------------------------------------------------------
 # registry
 # --------------------------------------------------------------------------------------------
 
@@ -313,6 +378,9 @@ _PRESETS: dict[str, tuple[Callable[..., dict[str, Any]], int, tuple[str, ...]]] 
         ("model_cloud",),
     ),
     "li-rotating": (_li_rotating, 16, ("distance", "axis")),
+    "dense-flash": (_dense_flash, 30, ("resolution",)),
+    "dense-kinect": (_dense_kinect, 30, ()),
+    "dense-hdl64": (_dense_hdl64, 30, ()),
 }
 
 PAPER_MEAN_POINTS: dict[str, float] = {

@@ -77,6 +77,19 @@ _PRESETS: dict[str, tuple[type[Sensor], dict[str, Any]]] = {
     "rs32": (ScanningLidar, _spinning(_RS32_ELEVATIONS, 0.2, 0.4, 200.0, 0.03)),
     "goldeneye": (FlashLidar, dict(_FLASH_128, max_range=3000.0, range_sigma=0.10)),
     "dragoneye": (FlashLidar, dict(_FLASH_128, max_range=1500.0, range_sigma=0.15)),
+    "flash256": (
+        FlashLidar,
+        dict(
+            # [interpretation] a dense 256×256 flash LIDAR (65 536 pixels), 30°×30°, 2 cm
+            rows=256,
+            cols=256,
+            fov_h_deg=30.0,
+            fov_v_deg=30.0,
+            min_range=0.5,
+            max_range=1000.0,
+            range_sigma=0.02,
+        ),
+    ),
     "kinect1": (DepthCamera, {}),
     "surface-hpr": (SurfaceSampler, dict(n_points=500, hpr_radius_factor=100.0)),
 }
@@ -112,7 +125,8 @@ def make_sensor(name: str, **overrides: Any) -> Sensor:
     """A sensor preset by name, with optional parameter overrides.
 
     Presets: ``vlp16``, ``hdl64``, ``rs32`` (scanning), ``goldeneye``, ``dragoneye`` (flash,
-    128×128, 45°×45°), ``kinect1`` (depth camera), ``surface-hpr`` (paper 1's HPR sampler).
+    128×128, 45°×45°), ``flash256`` (dense flash, 256×256, 30°×30°), ``kinect1`` (depth
+    camera), ``surface-hpr`` (paper 1's HPR sampler).
     See ALGORITHMS.md §H for the numbers.
 
     Raises
