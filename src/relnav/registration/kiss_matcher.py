@@ -39,7 +39,7 @@ without calling the library.
 solution whatever the inlier count; 6 is our choice of the smallest support worth trusting,
 not tuned on the navigation suite). A flagged result carries the initial guess (identity when
 none), as the other adapters. Empty, tiny, coincident, collinear or non-finite input is caught
-by the shared validation of :class:`~relnav.registration.external._ExternalBase`.
+by the shared validation of :class:`~relnav.registration.external_base._ExternalBase`.
 
 **Result fields** (``kiss-matcher``): ``fitness``, ``inlier_rmse``, ``n_inliers``,
 ``covariance`` and ``info["degeneracy_ratio"]`` are relnav's, computed at the estimate with the
@@ -69,7 +69,7 @@ from scipy.spatial import cKDTree
 from relnav.errors import ConfigError
 from relnav.features.keypoints import voxel_downsample
 from relnav.registration.base import register_method
-from relnav.registration.external import _ExternalBase, _flag, _positive, require
+from relnav.registration.external_base import _ExternalBase, _flag, _positive, require
 from relnav.registration.icp import ICP, PreparedCloud
 from relnav.registration.result import RegistrationResult
 
