@@ -86,3 +86,13 @@ def test_no_module_shadows_the_standard_library():
     names |= {p.name for p in SRC.rglob("*") if p.is_dir() and p.name != "__pycache__"}
     clashes = sorted((names & set(sys.stdlib_module_names)) - {"io"})
     assert not clashes, f"modules named like the standard library: {clashes}"
+
+
+def test_no_module_is_over_900_lines():
+    """One concept per module: a module that grows past 900 lines holds several (issue 14)."""
+    long = {
+        str(p.relative_to(SRC)): n
+        for p in SRC.rglob("*.py")
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > 900
+    }
+    assert not long, f"modules over 900 lines: {long}"
