@@ -88,6 +88,34 @@ def register_variants(cls: type, variants: dict[str, tuple[str, str]]) -> None:
         )
 
 
+def register_fixed(
+    cls: type, methods: dict[str, tuple[str, dict[str, Any]]], *, extra: str | None = None
+) -> None:
+    """Register ``cls(**fixed, **options)`` under each method prefix of ``methods``.
+
+    ``methods`` maps a prefix to ``(description, fixed)``: the keyword arguments that make the
+    method (e.g. ``{"variant": "plane"}``). The method takes no ``:`` spec, and an option that
+    repeats a fixed argument is a :class:`ConfigError`. The factories' return annotation is
+    ``cls``, so :func:`get_registration` checks the options against ``cls``'s signature.
+    """
+    for prefix, (description, fixed) in methods.items():
+        register_method(prefix, description, extra=extra)(_fixed_factory(cls, prefix, fixed))
+
+
+def _fixed_factory(cls: type, prefix: str, fixed: dict[str, Any]) -> Callable[..., Registration]:
+    def factory(spec: str | None, **options: Any) -> Registration:
+        if spec:
+            raise ConfigError(f"method {prefix!r} takes no ':' spec, got {spec!r}")
+        clash = sorted(set(fixed) & set(options))
+        if clash:
+            raise ConfigError(f"method {prefix!r} sets {clash[0]!r} itself; it is not an option")
+        return cls(**fixed, **options)
+
+    factory.__annotations__ = {**factory.__annotations__, "return": cls}
+    factory.__name__ = factory.__qualname__ = f"_make_{prefix.replace('-', '_')}"
+    return factory
+
+
 def _threshold_factory(cls: type, prefix: str, variant: str) -> Callable[..., Registration]:
     def factory(spec: str | None, **options: Any) -> Registration:
         if spec:

@@ -78,7 +78,6 @@ from relnav.registration.external_base import (  # noqa: F401
     _information,
     _is_dense,
     _max_range,
-    _no_spec,
     _positive,
     _total,
     information_degeneracy,

@@ -382,8 +382,3 @@ class _ExternalBase:
         self, src: PreparedCloud, tgt: PreparedCloud, T0: np.ndarray, timings: dict, info: dict
     ) -> RegistrationResult:  # pragma: no cover - abstract
         raise NotImplementedError
-
-
-def _no_spec(prefix: str, spec: str | None) -> None:
-    if spec:
-        raise ConfigError(f"method {prefix!r} takes no ':' spec, got {spec!r}")

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from relnav.errors import ConfigError
-from relnav.registration.base import register_method
+from relnav.registration.base import register_fixed
 from relnav.registration.external_base import (
     DENSE_POINTS,
     _dense_points,
@@ -19,7 +19,6 @@ from relnav.registration.external_base import (
     _fingerprint,
     _flag,
     _is_dense,
-    _no_spec,
     _positive,
     require,
 )
@@ -280,13 +279,14 @@ class KissICPRegistration(_ExternalBase):
         )
 
 
-@register_method(
-    "kiss-icp",
-    "KISS-ICP odometry (local voxel map, adaptive threshold); voxel = Tr (sparse scans) or "
-    "max_range/100, KISS-ICP's own rule (scans > 5000 points)",
+register_fixed(
+    KissICPRegistration,
+    {
+        "kiss-icp": (
+            "KISS-ICP odometry (local voxel map, adaptive threshold); voxel = Tr (sparse scans) "
+            "or max_range/100, KISS-ICP's own rule (scans > 5000 points)",
+            {},
+        )
+    },
     extra="baselines",
-    examples=["kiss-icp"],
 )
-def _make_kiss(spec: str | None, **options: Any) -> KissICPRegistration:
-    _no_spec("kiss-icp", spec)
-    return KissICPRegistration(**options)

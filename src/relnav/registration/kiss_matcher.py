@@ -68,7 +68,7 @@ from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError
 from relnav.features.keypoints import voxel_downsample
-from relnav.registration.base import register_method
+from relnav.registration.base import register_fixed
 from relnav.registration.external_base import _ExternalBase, _flag, _positive, require
 from relnav.registration.icp import ICP, PreparedCloud
 from relnav.registration.result import RegistrationResult
@@ -355,32 +355,17 @@ class KissMatcherRegistration(_ExternalBase):
         return result
 
 
-def _no_spec(prefix: str, spec: str | None) -> None:
-    if spec:
-        raise ConfigError(f"method {prefix!r} takes no ':' spec, got {spec!r}")
-
-
-@register_method(
-    "kiss-matcher",
-    "KISS-Matcher global registration (faster-PFH, max-core pruning, GNC), scale-aware",
+register_fixed(
+    KissMatcherRegistration,
+    {
+        "kiss-matcher": (
+            "KISS-Matcher global registration (faster-PFH, max-core pruning, GNC), scale-aware",
+            {"refine": False},
+        ),
+        "kiss-matcher-icp": (
+            "KISS-Matcher followed by relnav's point-to-plane ICP from its estimate",
+            {"refine": True},
+        ),
+    },
     extra="baselines",
-    examples=["kiss-matcher"],
 )
-def _make_kiss_matcher(spec: str | None, **options: Any) -> KissMatcherRegistration:
-    _no_spec("kiss-matcher", spec)
-    if "refine" in options:
-        raise ConfigError("kiss-matcher takes no 'refine' option (use kiss-matcher-icp)")
-    return KissMatcherRegistration(**options)
-
-
-@register_method(
-    "kiss-matcher-icp",
-    "KISS-Matcher followed by relnav's point-to-plane ICP from its estimate",
-    extra="baselines",
-    examples=["kiss-matcher-icp"],
-)
-def _make_kiss_matcher_icp(spec: str | None, **options: Any) -> KissMatcherRegistration:
-    _no_spec("kiss-matcher-icp", spec)
-    if "refine" in options:
-        raise ConfigError("kiss-matcher-icp takes no 'refine' option")
-    return KissMatcherRegistration(refine=True, **options)

@@ -13,11 +13,10 @@ import numpy as np
 
 from relnav.errors import ConfigError
 from relnav.geometry.rotations import rotation_angle
-from relnav.registration.base import register_method
+from relnav.registration.base import register_fixed
 from relnav.registration.external_base import (
     _ExternalBase,
     _flag,
-    _no_spec,
     _positive,
     require,
 )
@@ -372,34 +371,22 @@ class Open3DFPFHRansac(_ExternalBase):
         )
 
 
-@register_method(
-    "o3d-fpfh-ransac",
-    "Open3D: voxel downsampling, FPFH, RANSAC on feature matches (seeded), point-to-plane ICP",
+register_fixed(
+    Open3DFPFHRansac,
+    {
+        "o3d-fpfh-ransac": (
+            "Open3D: voxel downsampling, FPFH, RANSAC on feature matches (seeded), "
+            "point-to-plane ICP",
+            {},
+        )
+    },
     extra="baselines",
-    examples=["o3d-fpfh-ransac"],
 )
-def _make_o3d_fpfh(spec: str | None, **options: Any) -> Open3DFPFHRansac:
-    _no_spec("o3d-fpfh-ransac", spec)
-    return Open3DFPFHRansac(**options)
-
-
-@register_method(
-    "o3d-icp-point",
-    "Open3D point-to-point ICP from the initial guess",
+register_fixed(
+    Open3DICP,
+    {
+        "o3d-icp-point": ("Open3D point-to-point ICP from the initial guess", {"variant": "point"}),
+        "o3d-icp-plane": ("Open3D point-to-plane ICP from the initial guess", {"variant": "plane"}),
+    },
     extra="baselines",
-    examples=["o3d-icp-point"],
 )
-def _make_o3d_point(spec: str | None, **options: Any) -> Open3DICP:
-    _no_spec("o3d-icp-point", spec)
-    return Open3DICP("point", **options)
-
-
-@register_method(
-    "o3d-icp-plane",
-    "Open3D point-to-plane ICP from the initial guess",
-    extra="baselines",
-    examples=["o3d-icp-plane"],
-)
-def _make_o3d_plane(spec: str | None, **options: Any) -> Open3DICP:
-    _no_spec("o3d-icp-plane", spec)
-    return Open3DICP("plane", **options)
