@@ -121,7 +121,7 @@ class NavigatorConfig:
         (the scans do not determine that step to the required accuracy). The protection
         level is ``protection_k`` × the largest 1σ of the step's translation (rotation) from
         the filter's step covariance (recorded for every step as ``step_sigma_t``,
-        ``step_sigma_r_deg``).
+        ``step_sigma_r_deg`` and the whole 6×6 ``step_covariance``, body frame).
     protection_k : float
         Multiplier of the step's 1σ in the protection level.
     information : {"full", "normal"}

@@ -82,7 +82,7 @@ def measurement_covariance(H_left: np.ndarray, T_target_sensor: np.ndarray) -> n
 
 @dataclass(frozen=True)
 class StateRecord:
-    """What :func:`relative_state` needs of one navigator frame (about 420 bytes).
+    """What :func:`relative_state` needs of one navigator frame (about 700 bytes).
 
     Attributes
     ----------
