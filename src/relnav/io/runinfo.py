@@ -149,7 +149,9 @@ def run_info(
             )
         if steps:
             status = Counter(str(s.status) for s in steps)
-        else:  # a streamed run: the statuses are in its diagnostics file
+        elif hasattr(run, "status_counts"):  # a streamed run: read its diagnostics row by row
+            status = Counter(run.status_counts())
+        else:
             status = Counter(str(r.get("status", "")) for r in run.diagnostics())
         doc["flags"] = {
             "frames": len(run.timestamps),

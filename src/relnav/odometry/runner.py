@@ -99,6 +99,16 @@ class OdometryRun:
         times = self._times()
         return 1000.0 * float(np.median(times)) if times else float("nan")
 
+    def status_counts(self) -> dict[str, int]:
+        """Frames per status; a streamed run reads its diagnostics file row by row (memory
+        stays flat however long the run)."""
+        from collections import Counter
+
+        if not self.steps and "diagnostics" in self.paths and len(self.timestamps):
+            with self.paths["diagnostics"].open(newline="") as f:
+                return dict(Counter(str(r.get("status", "")) for r in csv.DictReader(f)))
+        return dict(Counter(str(s.status) for s in self.steps))
+
     def diagnostics(self) -> list[dict[str, Any]]:
         """One row per frame: points, correspondences, inliers, status, stage times (ms)."""
         if not self.steps and "diagnostics" in self.paths and len(self.timestamps):
