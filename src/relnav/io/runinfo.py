@@ -147,12 +147,10 @@ def run_info(
                 median_frame_ms=run.median_time_ms,
                 mean_frame_ms=run.mean_time_ms,
             )
-        if steps:
-            status = Counter(str(s.status) for s in steps)
-        elif hasattr(run, "status_counts"):  # a streamed run: read its diagnostics row by row
+        if hasattr(run, "status_counts"):  # kept steps, or a streamed run's diagnostics file
             status = Counter(run.status_counts())
         else:
-            status = Counter(str(r.get("status", "")) for r in run.diagnostics())
+            status = Counter(str(s.status) for s in steps)
         doc["flags"] = {
             "frames": len(run.timestamps),
             "flagged": int(run.n_flagged),

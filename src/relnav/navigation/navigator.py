@@ -46,6 +46,7 @@ from relnav.navigation.gicp import solve_scan_to_map
 from relnav.navigation.lie import log_se3
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.voxel_map import VoxelMap
+from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult
 from relnav.scan import Scan
@@ -82,7 +83,12 @@ class NavigatorConfig:
         Scans with fewer finite points are ``failed``.
     max_points : int
         Point budget of the registration: larger scans are reduced to a seeded random subset
-        (in scan order) of this size (``_random_subset``).
+        (in scan order) of this size (:func:`relnav.odometry.budget.reduce_to_budget`, seed
+        ``[0, frame]``). **[interpretation, measured]** An even subset of a raster scan (every
+        k-th pixel) repeats from frame to frame and aliases with the image rows; a random draw
+        does not. RPE translation, random vs even (first 10 frames of the ``dense-*`` presets;
+        first 80 of sim-eoi, seed 0): Kinect 221k points 7.3 vs 40.7 mm, flash at 30k 8.7 vs
+        18.4 mm, at 121k 13.0 vs 9.8 mm (worse), sim-eoi (3 200 points) 10.0 vs 10.9 mm.
     max_map_points : int
         Point budget of the map update (an evenly spaced subset of the registered points).
     min_overlap : float
@@ -174,22 +180,6 @@ def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
     if len(P) <= budget:
         return P
     return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
-
-
-def _random_subset(P: np.ndarray, budget: int, frame: int) -> np.ndarray:
-    """At most ``budget`` distinct points drawn uniformly, in scan order (all when fewer);
-    seeded by the frame index (``default_rng([0, frame])``).
-
-    **[interpretation, measured]** An even subset of a raster scan (every k-th pixel) is a
-    regular pattern that repeats from frame to frame and aliases with the image rows; a random
-    draw does not. RPE translation, random vs even (first 10 frames of the ``dense-*``
-    presets; first 80 of sim-eoi, seed 0): Kinect 221k points 7.3 vs 40.7 mm (1.99° → 0.33°),
-    flash at 30k 8.7 vs 18.4 mm, at 121k 13.0 vs 9.8 mm (worse), sim-eoi (3 200 points)
-    10.0 vs 10.9 mm (APE 0.049 vs 0.061 m); scans within the budget are unchanged."""
-    if len(P) <= budget:
-        return P
-    idx = np.random.default_rng([0, int(frame)]).choice(len(P), size=budget, replace=False)
-    return P[np.sort(idx)]
 
 
 def _rms_radius(P: np.ndarray) -> float:
@@ -293,7 +283,7 @@ class Navigator:
         P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
-        P = _random_subset(P, self.config.max_points, self.n_frames)
+        P, _ = reduce_to_budget(P, self.config.max_points, seed=[0, self.n_frames])
         K = self.config.bootstrap_frames
         if self._boot is not None:
             self._boot.append((P, t, n_raw))

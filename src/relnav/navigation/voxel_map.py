@@ -284,15 +284,12 @@ class VoxelMap:
 
     def _lookup(self, codes: np.ndarray) -> np.ndarray:
         """Storage slot of each sorted cell code (-1: not in the map)."""
-        pos = np.searchsorted(self._codes, codes)
-        pos_c = np.minimum(pos, max(len(self._codes) - 1, 0))
-        hit = (
-            (pos < len(self._codes)) & (self._codes[pos_c] == codes)
-            if len(self._codes)
-            else (np.zeros(len(codes), dtype=bool))
-        )
         out = np.full(len(codes), -1, dtype=np.int64)
-        out[hit] = self._code_slots[pos_c[hit]]
+        if not len(self._codes):
+            return out
+        pos = np.minimum(np.searchsorted(self._codes, codes), len(self._codes) - 1)
+        hit = self._codes[pos] == codes
+        out[hit] = self._code_slots[pos[hit]]
         return out
 
     def _append(self, keys: np.ndarray) -> np.ndarray:

@@ -111,6 +111,14 @@ def _fixed_factory(cls: type, prefix: str, fixed: dict[str, Any]) -> Callable[..
             raise ConfigError(f"method {prefix!r} sets {clash[0]!r} itself; it is not an option")
         return cls(**fixed, **options)
 
+    return _factory_of(cls, prefix, factory)
+
+
+def _factory_of(
+    cls: type, prefix: str, factory: Callable[..., Registration]
+) -> Callable[..., Registration]:
+    """Name ``factory`` after ``prefix`` and annotate it as returning ``cls`` (the option check
+    of :func:`get_registration` reads that annotation)."""
     factory.__annotations__ = {**factory.__annotations__, "return": cls}
     factory.__name__ = factory.__qualname__ = f"_make_{prefix.replace('-', '_')}"
     return factory
@@ -125,9 +133,7 @@ def _threshold_factory(cls: type, prefix: str, variant: str) -> Callable[..., Re
             options = {**options, "thresholds": s}
         return cls(variant, **options)
 
-    factory.__annotations__ = {**factory.__annotations__, "return": cls}
-    factory.__name__ = factory.__qualname__ = f"_make_{prefix.replace('-', '_')}"
-    return factory
+    return _factory_of(cls, prefix, factory)
 
 
 METHOD_MODULES: tuple[str, ...] = (
