@@ -9,7 +9,7 @@ from relnav.errors import ConfigError, InputError
 from relnav.features import compute, get_descriptor
 from relnav.features.rops import rops, rops_rotations
 from relnav.geometry import mean_resolution, random_transform, transform_points
-from relnav.geometry.lrf import rops_lrf
+from relnav.geometry.lrf import rops_local_mesh, rops_lrf
 
 # Tolerances (one place). Descriptors are float32 with entries O(1e-3..1e-1); in float64 the
 # transformed cloud changes local coordinates by ~1e-15, so on keypoints with a well-defined LRF
@@ -292,6 +292,53 @@ def test_local_mesh_lrf_equals_mesh_lrf_on_an_independent_delaunay(surface) -> N
             n_checked += 1
             np.testing.assert_allclose(got, ref, atol=1e-9)
     assert n_checked >= 3
+
+
+def test_local_mesh_csr_reproduces_the_default_frame_and_descriptor(surface) -> None:
+    """Each keypoint's CSR triangles, given as its mesh, give the default frame and descriptor.
+
+    This is what keeps ``tests/data/pcl``'s ``rops_local`` (PCL's RoPS on these triangles) a valid
+    reference for the default ``rops``: both come from one triangulation routine.
+    """
+    P, r = surface
+    kp = np.arange(0, P.shape[0], 7)
+    off, tris = rops_local_mesh(P, kp, r)
+    assert off.shape == (kp.size + 1,) and off[0] == 0 and off[-1] == tris.shape[0]
+    assert tris.shape[1] == 3 and tris.dtype == np.int64
+    me = 3.0 * mean_resolution(P)
+    lrf = rops_lrf(P, kp, r)
+    D = rops(P, kp, radius=r)
+    n_defined = 0
+    for k, i in enumerate(kp):
+        t = tris[off[k] : off[k + 1]]
+        assert t.shape[0] > 0
+        # PCL's rule for the triangles of a support: at least one vertex within r; edges ≤ 3·Tr
+        assert (np.linalg.norm(P[t] - P[i], axis=2) <= r).any(axis=1).all()
+        assert np.linalg.norm(P[t] - P[np.roll(t, 1, axis=1)], axis=2).max() <= me
+        got = rops_lrf(P, np.array([i]), r, triangles=t)[0]
+        np.testing.assert_allclose(got, lrf[k], atol=LRF_ATOL)  # NaN where both are NaN
+        np.testing.assert_allclose(
+            rops(P, np.array([i]), radius=r, triangles=t)[0], D[k], atol=DESC_ATOL
+        )
+        n_defined += bool(np.isfinite(got).all())
+    assert n_defined >= 0.9 * kp.size
+
+
+def test_local_mesh_csr_edge_cases(surface) -> None:
+    P, r = surface
+    off, tris = rops_local_mesh(P, np.zeros(0, dtype=np.int64), r)
+    assert off.tolist() == [0] and tris.shape == (0, 3)
+    # a keypoint whose support has fewer than 5 points has no triangles (and no frame)
+    far = np.vstack([P, P[:4] + 100.0])
+    off, tris = rops_local_mesh(far, np.array([P.shape[0], 0]), r)
+    assert off[1] == 0 and off[2] > 0 and np.isnan(rops_lrf(far, [P.shape[0]], r)).all()
+    # a shorter max_edge drops triangles
+    _, tris2 = rops_local_mesh(P, np.array([0]), r, max_edge=mean_resolution(P))
+    assert tris2.shape[0] < tris.shape[0] - off[1]
+    with pytest.raises(ConfigError):
+        rops_local_mesh(P, np.array([0]), r, max_edge=0.0)
+    with pytest.raises(InputError):
+        rops_local_mesh(P, np.array([0]), -1.0)
 
 
 def test_lrf_option_validated(surface) -> None:

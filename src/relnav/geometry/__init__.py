@@ -7,7 +7,7 @@ from relnav.geometry.dualquat import (
     dq_multiply,
     dq_to_matrix,
 )
-from relnav.geometry.lrf import radius_search, rops_lrf, shot_lrf
+from relnav.geometry.lrf import radius_search, rops_local_mesh, rops_lrf, shot_lrf
 from relnav.geometry.neighbors import build_tree, knn, mean_resolution, radius_neighbors
 from relnav.geometry.normals import estimate_normals, local_covariances
 from relnav.geometry.rotations import (
@@ -45,6 +45,7 @@ __all__ = [
     "dq_multiply",
     "dq_to_matrix",
     "radius_search",
+    "rops_local_mesh",
     "rops_lrf",
     "shot_lrf",
     "build_tree",

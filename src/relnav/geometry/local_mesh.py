@@ -9,7 +9,9 @@ dropped, so holes, silhouettes and gaps between separate parts stay open (the ro
 ("triangulate"): PCL triangulates the whole cloud greedily; a different triangulation of the same
 points gives a different mesh LRF where the two largest scatter eigenvalues are close.
 
-All functions here are numba kernels working on one neighbourhood at a time.
+All functions here are numba kernels working on one neighbourhood at a time;
+:func:`local_mesh_triangles` is the one the RoPS LRF kernel and
+:func:`relnav.geometry.lrf.rops_local_mesh` (the same triangles as CSR arrays) both call.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["delaunay_2d"]
+__all__ = ["delaunay_2d", "local_mesh_triangles"]
 
 
 @njit(cache=True)
@@ -208,3 +210,90 @@ def delaunay_2d(uv: np.ndarray) -> np.ndarray:
             out[m] = tri[t]
             m += 1
     return out
+
+
+@njit(cache=True)
+def local_mesh_triangles(
+    P: np.ndarray, p: np.ndarray, idx: np.ndarray, radius: float, max_edge: float, min_support: int
+) -> np.ndarray:
+    """Local triangle mesh of one keypoint's neighbourhood, as the RoPS LRF uses it.
+
+    The support is ``{q : ‖q − p‖² ≤ radius²}`` (the same test as the radius search of
+    :func:`relnav.geometry.radius_grid.radius_search`). The tangent plane is spanned by the two
+    major axes of the support scatter ``Σ (r − d)² v vᵀ`` (``v = q − p``, ``d = ‖v‖``); all of
+    ``idx`` is projected onto it and triangulated (:func:`delaunay_2d`; a point whose projection
+    duplicates another's is not a vertex). A triangle is kept when at least one vertex is in the
+    support (PCL's rule for the triangles of a RoPS support) and no edge is longer than
+    ``max_edge`` (3D length).
+
+    Parameters
+    ----------
+    P : (N, 3) float64
+        Cloud, metres.
+    p : (3,) float64
+        Keypoint, metres.
+    idx : (n,) int64
+        Indices into ``P`` of the points within ``radius + max_edge`` of ``p`` (keypoint
+        included): every vertex a kept triangle can have.
+    radius : float
+        Support radius, metres.
+    max_edge : float
+        Longest kept edge, metres.
+    min_support : int
+        Fewer points than this in ``idx`` or in the support: no triangles.
+
+    Returns
+    -------
+    (m, 3) int64
+        Vertex indices into ``P`` (counter-clockwise in the tangent plane); ``m = 0`` when the
+        support is too small or no triangle is kept.
+    """
+    n = idx.shape[0]
+    if n < min_support:
+        return np.zeros((0, 3), dtype=np.int64)
+    rel = np.empty((n, 3))
+    inside = np.empty(n, dtype=np.bool_)
+    n_in = 0
+    r2 = radius * radius
+    C = np.zeros((3, 3))
+    for t in range(n):
+        d2 = 0.0
+        for i in range(3):
+            rel[t, i] = P[idx[t], i] - p[i]
+            d2 += rel[t, i] * rel[t, i]
+        inside[t] = d2 <= r2
+        if inside[t]:
+            n_in += 1
+            w = (radius - np.sqrt(d2)) ** 2
+            for i in range(3):
+                for j in range(3):
+                    C[i, j] += w * rel[t, i] * rel[t, j]
+    if n_in < min_support:
+        return np.zeros((0, 3), dtype=np.int64)
+    _, V = np.linalg.eigh(C)  # tangent plane: the two largest axes of the support scatter
+    uv = np.empty((n, 2))
+    for t in range(n):
+        uv[t, 0] = rel[t, 0] * V[0, 2] + rel[t, 1] * V[1, 2] + rel[t, 2] * V[2, 2]
+        uv[t, 1] = rel[t, 0] * V[0, 1] + rel[t, 1] * V[1, 1] + rel[t, 2] * V[2, 1]
+    loc = delaunay_2d(uv)
+    me2 = max_edge * max_edge
+    tris = np.empty((loc.shape[0], 3), dtype=np.int64)
+    nt = 0
+    for j in range(loc.shape[0]):
+        if not (inside[loc[j, 0]] or inside[loc[j, 1]] or inside[loc[j, 2]]):
+            continue
+        ok = True
+        for e in range(3):
+            u = loc[j, e]
+            v = loc[j, (e + 1) % 3]
+            l2 = 0.0
+            for i in range(3):
+                l2 += (rel[u, i] - rel[v, i]) ** 2
+            if l2 > me2:
+                ok = False
+                break
+        if ok:
+            for e in range(3):
+                tris[nt, e] = idx[loc[j, e]]
+            nt += 1
+    return tris[:nt].copy()

@@ -16,7 +16,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
-from relnav.geometry.local_mesh import delaunay_2d
+from relnav.geometry.local_mesh import local_mesh_triangles
 from relnav.geometry.neighbors import mean_resolution
 from relnav.geometry.radius_grid import _argsort_d2_idx as _argsort_d2_idx  # numba, old path
 from relnav.geometry.radius_grid import _check_points, _support_csr, radius_search
@@ -30,7 +30,7 @@ from relnav.geometry.shot_lrf import _shot_lrf_kernel as _shot_lrf_kernel
 from relnav.geometry.shot_lrf import _shot_lrf_kernel_csr as _shot_lrf_kernel_csr
 from relnav.geometry.shot_lrf import _shot_lrf_one as _shot_lrf_one
 
-__all__ = ["SHOT_MIN_NEIGHBORS", "radius_search", "rops_lrf", "shot_lrf"]
+__all__ = ["SHOT_MIN_NEIGHBORS", "radius_search", "rops_local_mesh", "rops_lrf", "shot_lrf"]
 
 ROPS_MIN_SUPPORT = 5
 """Minimum support points (keypoint included) for a RoPS LRF (same rule as descriptors)."""
@@ -247,7 +247,7 @@ def _rops_lrf_local_mesh_kernel(
     min_support: int,
     tol: float,
 ) -> np.ndarray:
-    """Mesh RoPS LRF on a local Delaunay triangulation (see :mod:`relnav.geometry.local_mesh`).
+    """Mesh RoPS LRF on a local Delaunay triangulation (:func:`local_mesh_triangles`).
 
     ``flat``/``offsets``: CSR neighbourhoods of radius ``radius + max_edge`` (keypoint included).
     """
@@ -257,71 +257,114 @@ def _rops_lrf_local_mesh_kernel(
     m = np.zeros(3)
     frame = np.zeros((3, 3))
     vv = np.zeros((3, 3))
-    me2 = max_edge * max_edge
     for k in range(K):
-        s0 = offsets[k]
-        n = offsets[k + 1] - s0
-        if n < min_support:
-            continue
         p = P[kp[k]]
-        idx = flat[s0 : s0 + n]
-        rel = np.empty((n, 3))
-        inside = np.empty(n, dtype=np.bool_)
-        n_in = 0
-        C[:, :] = 0.0
-        for t in range(n):
-            d2 = 0.0
-            for i in range(3):
-                rel[t, i] = P[idx[t], i] - p[i]
-                d2 += rel[t, i] * rel[t, i]
-            d = np.sqrt(d2)
-            inside[t] = d <= radius
-            if inside[t]:
-                n_in += 1
-                w = (radius - d) * (radius - d)
-                for i in range(3):
-                    for j in range(3):
-                        C[i, j] += w * rel[t, i] * rel[t, j]
-        if n_in < min_support:
-            continue
-        _, V = np.linalg.eigh(C)  # tangent plane: the two largest axes of the support scatter
-        uv = np.empty((n, 2))
-        for t in range(n):
-            uv[t, 0] = rel[t, 0] * V[0, 2] + rel[t, 1] * V[1, 2] + rel[t, 2] * V[2, 2]
-            uv[t, 1] = rel[t, 0] * V[0, 1] + rel[t, 1] * V[1, 1] + rel[t, 2] * V[2, 1]
-        loc = delaunay_2d(uv)
-        tris = np.empty((loc.shape[0], 3), dtype=np.int64)
-        nt = 0
-        for j in range(loc.shape[0]):
-            a = loc[j, 0]
-            b = loc[j, 1]
-            c = loc[j, 2]
-            if not (inside[a] or inside[b] or inside[c]):
-                continue
-            ok = True
-            for e in range(3):
-                u = loc[j, e]
-                v = loc[j, (e + 1) % 3]
-                l2 = 0.0
-                for i in range(3):
-                    l2 += (rel[u, i] - rel[v, i]) ** 2
-                if l2 > me2:
-                    ok = False
-                    break
-            if ok:
-                tris[nt, 0] = idx[a]
-                tris[nt, 1] = idx[b]
-                tris[nt, 2] = idx[c]
-                nt += 1
+        tris = local_mesh_triangles(
+            P, p, flat[offsets[k] : offsets[k + 1]], radius, max_edge, min_support
+        )
+        nt = tris.shape[0]
         if nt == 0:
             continue
-        sel = np.arange(nt)
-        ssum = _mesh_scatter(P, p, tris, sel, nt, radius, C, m, vv)
+        ssum = _mesh_scatter(P, p, tris, np.arange(nt), nt, radius, C, m, vv)
         if not (ssum > 0.0):
             continue
         if _frame_from_scatter(C, m, ssum, tol, frame):
             out[k] = frame
     return out
+
+
+@njit(cache=True)
+def _local_mesh_csr_kernel(
+    P: np.ndarray,
+    kp: np.ndarray,
+    flat: np.ndarray,
+    offsets: np.ndarray,
+    radius: float,
+    max_edge: float,
+    min_support: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`local_mesh_triangles` of every keypoint as CSR ``(tri_offsets, triangles)``."""
+    K = kp.shape[0]
+    tri_off = np.zeros(K + 1, dtype=np.int64)
+    buf = np.empty((max(16, 2 * flat.shape[0]), 3), dtype=np.int64)
+    for k in range(K):
+        tris = local_mesh_triangles(
+            P, P[kp[k]], flat[offsets[k] : offsets[k + 1]], radius, max_edge, min_support
+        )
+        s = tri_off[k]
+        e = s + tris.shape[0]
+        if e > buf.shape[0]:
+            grown = np.empty((2 * e, 3), dtype=np.int64)
+            grown[:s] = buf[:s]
+            buf = grown
+        buf[s:e] = tris
+        tri_off[k + 1] = e
+    return tri_off, buf[: tri_off[K]].copy()
+
+
+def _local_mesh_support(
+    P: np.ndarray, kp: np.ndarray, radius: float, max_edge: float | None, tree: cKDTree | None
+) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """``(max_edge, flat, offsets)``: the local-mesh edge limit (default ``3·Tr``) and the CSR
+    neighbourhoods of radius ``radius + max_edge``; None for fewer than two distinct points."""
+    if max_edge is None:
+        max_edge = ROPS_MAX_EDGE_FACTOR * mean_resolution(P, tree)
+    if not np.isfinite(max_edge):
+        return None
+    flat, offsets = _support_csr(P, kp, radius + float(max_edge), tree)
+    return float(max_edge), flat, offsets
+
+
+def rops_local_mesh(
+    points: np.ndarray,
+    keypoint_idx: np.ndarray,
+    radius: float,
+    *,
+    max_edge: float | None = None,
+    tree: cKDTree | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The local triangles the default RoPS LRF (``lrf="local_mesh"``) uses at each keypoint.
+
+    Same code path as :func:`rops_lrf` (:func:`relnav.geometry.local_mesh.local_mesh_triangles`
+    on the same neighbourhoods), so ``rops_lrf(points, [kp[k]], radius,
+    triangles=triangles[tri_offsets[k]:tri_offsets[k + 1]])`` is the default frame of keypoint
+    ``k`` (up to the summation order). Each keypoint has its own mesh: the meshes of nearby
+    keypoints overlap and need not agree, so their union is not a mesh of the cloud.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Cloud, metres.
+    keypoint_idx : (K,) int
+        Keypoint indices into ``points``.
+    radius : float
+        Support radius ``r``, metres.
+    max_edge : float, optional
+        Longest local-mesh edge, metres (default ``3·Tr``, ``Tr`` the mean resolution).
+    tree : scipy.spatial.cKDTree, optional
+        Prebuilt tree of ``points`` (as passed to :func:`rops_lrf`).
+
+    Returns
+    -------
+    tri_offsets : (K + 1,) int64
+        Keypoint ``k``'s triangles are rows ``tri_offsets[k]:tri_offsets[k + 1]``; none when its
+        support has fewer than 5 points (keypoint included).
+    triangles : (M, 3) int64
+        Vertex indices into ``points``; every triangle has a vertex within ``radius`` of its
+        keypoint and no edge longer than ``max_edge``.
+    """
+    P, kp = _check_points(points, keypoint_idx)
+    if not (np.isfinite(radius) and radius > 0):
+        raise InputError(f"local-mesh radius must be positive and finite, got {radius}")
+    check_rops_lrf("local_mesh", max_edge)
+    empty = (np.zeros(kp.size + 1, dtype=np.int64), np.zeros((0, 3), dtype=np.int64))
+    if kp.size == 0:
+        return empty
+    sup = _local_mesh_support(P, kp, float(radius), max_edge, tree)
+    if sup is None:
+        return empty
+    me, flat, offsets = sup
+    return _local_mesh_csr_kernel(P, kp, flat, offsets, float(radius), me, ROPS_MIN_SUPPORT)
 
 
 def rops_lrf(
@@ -340,7 +383,7 @@ def rops_lrf(
     Local-mesh version (default, ``lrf="local_mesh"``, **[interpretation]** of ALGORITHMS §A.4
     for point clouds): the mesh version below on a Delaunay triangulation of the keypoint's
     neighbourhood projected onto its tangent plane, edges ``≤ max_edge``
-    (:mod:`relnav.geometry.local_mesh`).
+    (:mod:`relnav.geometry.local_mesh`); :func:`rops_local_mesh` returns these triangles.
 
     Point-based version (``lrf="points"``):
     with ``v_i = q_i − p`` over the support ``{q_i : ‖q_i − p‖ ≤ r}`` and ``d_i = ‖v_i‖``,
@@ -423,13 +466,12 @@ def _rops_lrf_csr(
         return _rops_lrf_points_kernel(P, kp, flat, offsets, radius, ROPS_MIN_SUPPORT, tol)
     if triangles is None:
         check_rops_lrf(lrf, max_edge)
-        if max_edge is None:
-            max_edge = ROPS_MAX_EDGE_FACTOR * mean_resolution(P, tree)
-        if not np.isfinite(max_edge):  # fewer than two distinct points: no frame
+        sup = _local_mesh_support(P, kp, radius, max_edge, tree)
+        if sup is None:  # fewer than two distinct points: no frame
             return np.full((kp.shape[0], 3, 3), np.nan)
-        ext_flat, ext_off = _support_csr(P, kp, radius + float(max_edge), tree)
+        me, ext_flat, ext_off = sup
         return _rops_lrf_local_mesh_kernel(
-            P, kp, ext_flat, ext_off, radius, float(max_edge), ROPS_MIN_SUPPORT, tol
+            P, kp, ext_flat, ext_off, radius, me, ROPS_MIN_SUPPORT, tol
         )
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     if tris.ndim != 2 or tris.shape[1] != 3:
