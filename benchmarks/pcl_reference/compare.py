@@ -2,9 +2,10 @@
 
 Run: ``python benchmarks/pcl_reference/compare.py [--fixture tests/data/pcl/pcl_reference.npz]
 [--other OTHER.npz]`` — prints, per cloud and descriptor, the median and 5th percentile of the
-Pearson correlation over the keypoints finite on both sides. ``--other`` (a fixture regenerated
-with other greedy-projection settings) adds PCL's RoPS on that mesh against PCL's RoPS on the
-fixture's mesh.
+Pearson correlation over the keypoints finite on both sides. The default RoPS is compared with
+both PCL references: ``rops_local`` (PCL on the same local triangles, like for like) and ``rops``
+(PCL on its greedy-projection mesh). ``--other`` (a fixture regenerated with other
+greedy-projection settings) adds PCL's RoPS on that mesh against PCL's RoPS on the fixture's mesh.
 """
 
 from __future__ import annotations
@@ -46,18 +47,20 @@ def main() -> None:
         kp = Z[f"{c}/keypoints"].astype(np.int64)
         r = float(Z[f"{c}/radius"])
         T = Z[f"{c}/triangles"]
-        rows = {
-            "spin layout=pcl": (spin(P, kp, radius=r, normals=N, layout="pcl"), "spin"),
-            "RoPS on PCL's mesh": (rops(P, kp, radius=r, triangles=T), "rops"),
-            "RoPS lrf=local_mesh (default)": (rops(P, kp, radius=r), "rops"),
-            "RoPS lrf=points": (rops(P, kp, radius=r, lrf="points"), "rops"),
-            "FPFH": (fpfh(P, kp, radius=r, normals=N), "fpfh"),
-            "SHOT layout=pcl": (shot(P, kp, radius=r, normals=N, layout="pcl"), "shot"),
-        }
-        for name, (D, key) in rows.items():
-            print(f"{c:9s} {name:30s} {corr(D, Z[f'{c}/{key}'])}")
+        default = rops(P, kp, radius=r)
+        rows = [
+            ("spin layout=pcl", spin(P, kp, radius=r, normals=N, layout="pcl"), "spin"),
+            ("RoPS on PCL's mesh", rops(P, kp, radius=r, triangles=T), "rops"),
+            ("RoPS default vs PCL, same local mesh", default, "rops_local"),
+            ("RoPS default vs PCL's greedy mesh", default, "rops"),
+            ("RoPS lrf=points vs greedy mesh", rops(P, kp, radius=r, lrf="points"), "rops"),
+            ("FPFH", fpfh(P, kp, radius=r, normals=N), "fpfh"),
+            ("SHOT layout=pcl", shot(P, kp, radius=r, normals=N, layout="pcl"), "shot"),
+        ]
+        for name, D, key in rows:
+            print(f"{c:9s} {name:37s} {corr(D, Z[f'{c}/{key}'])}")
         if O is not None:
-            print(f"{c:9s} {'PCL RoPS, other mesh':30s} {corr(O[f'{c}/rops'], Z[f'{c}/rops'])}")
+            print(f"{c:9s} {'PCL RoPS, other mesh':37s} {corr(O[f'{c}/rops'], Z[f'{c}/rops'])}")
 
 
 if __name__ == "__main__":

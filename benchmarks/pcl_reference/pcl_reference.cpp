@@ -2,14 +2,18 @@
 //
 // Usage: pcl_reference IN.bin OUT.bin
 // IN:  int32 N, K, spin_width; float32 radius, gp3_radius, gp3_mu; N x 6 float32 (x y z nx ny nz);
-//      K int32 keypoint indices.
-// OUT: for spin, rops, fpfh, shot, triangles in turn: int32 rows, cols, then rows x cols values
-//      (float32; int32 for the triangles).
+//      K int32 keypoint indices; int32 M, then K + 1 int32 offsets and M x 3 int32 vertex indices:
+//      the local triangles of each keypoint (CSR, relnav's rops_local_mesh).
+// OUT: for spin, rops, fpfh, shot, triangles, rops_local in turn: int32 rows, cols, then
+//      rows x cols values (float32; int32 for the triangles). rops_local row k is ROPSEstimation
+//      at keypoint k alone (search surface = the whole cloud) with keypoint k's local triangles
+//      as the mesh; NaN when it has none.
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <vector>
 
 #include <pcl/features/fpfh.h>
@@ -44,7 +48,13 @@ int main(int argc, char** argv) {
   in.read(reinterpret_cast<char*>(buf.data()), sizeof(float) * buf.size());
   std::vector<int32_t> kp(K);
   in.read(reinterpret_cast<char*>(kp.data()), sizeof(int32_t) * K);
-  if (!in) {
+  int32_t n_local = 0;
+  in.read(reinterpret_cast<char*>(&n_local), sizeof n_local);
+  std::vector<int32_t> local_off(K + 1);
+  std::vector<int32_t> local_tri(3 * static_cast<size_t>(n_local));
+  in.read(reinterpret_cast<char*>(local_off.data()), sizeof(int32_t) * local_off.size());
+  in.read(reinterpret_cast<char*>(local_tri.data()), sizeof(int32_t) * local_tri.size());
+  if (!in || local_off[0] != 0 || local_off[K] != n_local) {
     std::cerr << "short input\n";
     return 1;
   }
@@ -165,6 +175,46 @@ int main(int argc, char** argv) {
     for (const auto& tri : triangles)
       for (int a = 0; a < 3; ++a) t.push_back(static_cast<int32_t>(tri.vertices[a]));
     write_block(out, static_cast<int32_t>(triangles.size()), 3, t);
+  }
+
+  // --- RoPS at each keypoint alone on its own local triangles (relnav's default local mesh);
+  // the search surface (support points) stays the whole cloud
+  {
+    std::vector<float> v;
+    v.reserve(static_cast<size_t>(K) * 135);
+    int n_nan = 0;
+    for (int k = 0; k < K; ++k) {
+      std::vector<pcl::Vertices> local;
+      for (int32_t t = local_off[k]; t < local_off[k + 1]; ++t) {
+        pcl::Vertices tri;
+        for (int a = 0; a < 3; ++a)
+          tri.vertices.push_back(static_cast<pcl::index_t>(local_tri[3 * static_cast<size_t>(t) + a]));
+        local.push_back(tri);
+      }
+      pcl::PointCloud<pcl::Histogram<135>> res;
+      if (!local.empty()) {
+        pcl::IndicesPtr one(new pcl::Indices(1, kp[k]));
+        pcl::ROPSEstimation<pcl::PointXYZ, pcl::Histogram<135>> rops;
+        rops.setInputCloud(xyz);
+        rops.setIndices(one);
+        rops.setSearchMethod(tree);
+        rops.setRadiusSearch(radius);
+        rops.setTriangles(local);
+        rops.setNumberOfPartitionBins(5);
+        rops.setNumberOfRotations(3);
+        rops.setSupportRadius(radius);
+        rops.compute(res);
+      }
+      if (res.size() == 1) {
+        v.insert(v.end(), res[0].histogram, res[0].histogram + 135);
+      } else {
+        v.insert(v.end(), 135, std::numeric_limits<float>::quiet_NaN());
+        ++n_nan;
+      }
+    }
+    write_block(out, K, 135, v);
+    std::cerr << "pcl_reference: RoPS on " << n_local << " local triangles, " << n_nan
+              << " keypoints without\n";
   }
   std::cerr << "pcl_reference: " << K << " keypoints, " << triangles.size() << " triangles\n";
   return 0;

@@ -20,11 +20,19 @@ The C++ program (``pcl_reference.cpp``) computes on these points:
 * ``GreedyProjectionTriangulation`` of the whole cloud (search radius ``GP3_RADIUS_FACTOR`` ×
   resolution, mu 2.5, 100 neighbours, PCL-tutorial angles) and ``ROPSEstimation`` on that mesh
   (5 bins, 3 rotations, support radius = radius);
-* ``FPFHEstimation`` and ``SHOTEstimation`` (radius, normals as given).
+* ``FPFHEstimation`` and ``SHOTEstimation`` (radius, normals as given);
+* ``ROPSEstimation`` at each keypoint alone (``setIndices`` with that keypoint, the search
+  surface still the whole cloud) with ``setTriangles`` = that keypoint's local triangles, the
+  mesh relnav's default RoPS builds its frame from (``relnav.geometry.lrf.rops_local_mesh`` on the
+  float32 points as float64, default ``max_edge`` = 3·Tr): the like-for-like reference of the
+  default ``rops``.
 
 The npz holds, per cloud ``c``: ``c/points``, ``c/normals`` (N, 3) float32, ``c/keypoints`` (K,)
 int32, ``c/radius``, ``c/triangles`` (M, 3) int32 (PCL's mesh), ``c/spin`` (K, 153),
-``c/rops`` (K, 135), ``c/fpfh`` (K, 33), ``c/shot`` (K, 352) float32 (NaN where PCL gives NaN).
+``c/rops`` (K, 135), ``c/fpfh`` (K, 33), ``c/shot`` (K, 352) float32 (NaN where PCL gives NaN),
+``c/rops_local`` (K, 135) float32 (PCL's RoPS on the local triangles; NaN for a keypoint without
+any) and those triangles as CSR ``c/rops_local_offsets`` (K + 1,) and ``c/rops_local_triangles``
+(M, 3) int32 (keypoint ``k``'s are rows ``offsets[k]:offsets[k + 1]``).
 """
 
 from __future__ import annotations
@@ -37,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from relnav.geometry import mean_resolution
+from relnav.geometry.lrf import rops_local_mesh
 from relnav.sim.sensors import SurfaceSampler
 from relnav.sim.targets import procedural_target
 
@@ -64,13 +73,18 @@ def make_cloud(
     normals = normals.astype(np.float32)
     res = mean_resolution(pts.astype(np.float64))
     kp = np.sort(rng.choice(N_POINTS, size=N_KEYPOINTS, replace=False)).astype(np.int32)
+    radius = np.float32(RADIUS_FACTOR * res)
+    # the local meshes exactly as the default rops(points, kp, radius=radius) builds them
+    tri_off, tris = rops_local_mesh(pts.astype(np.float64), kp, float(radius))
     return {
         "points": pts,
         "normals": normals,
         "keypoints": kp,
-        "radius": np.float32(RADIUS_FACTOR * res),
+        "radius": radius,
         "gp3_radius": np.float32(gp3_rf * res),
         "gp3_mu": np.float32(gp3_mu),
+        "rops_local_offsets": tri_off.astype(np.int32),
+        "rops_local_triangles": tris.astype(np.int32),
     }
 
 
@@ -87,11 +101,14 @@ def run_pcl(exe: Path, cloud: dict[str, np.ndarray], work: Path) -> dict[str, np
         )
         np.hstack([cloud["points"], cloud["normals"]]).astype(np.float32).tofile(fh)
         cloud["keypoints"].astype(np.int32).tofile(fh)
+        np.array([cloud["rops_local_triangles"].shape[0]], dtype=np.int32).tofile(fh)
+        cloud["rops_local_offsets"].astype(np.int32).tofile(fh)
+        cloud["rops_local_triangles"].astype(np.int32).tofile(fh)
     subprocess.run([str(exe), str(inp), str(out)], check=True)
     raw = out.read_bytes()
     res: dict[str, np.ndarray] = {}
     pos = 0
-    for name in ("spin", "rops", "fpfh", "shot", "triangles"):
+    for name in ("spin", "rops", "fpfh", "shot", "triangles", "rops_local"):
         rows, cols = np.frombuffer(raw, dtype=np.int32, count=2, offset=pos)
         pos += 8
         dt = np.int32 if name == "triangles" else np.float32
@@ -124,7 +141,8 @@ def main() -> None:
             print(
                 f"{name}: {cloud['points'].shape[0]} points, "
                 f"radius {float(cloud['radius']):.4g} m, "
-                f"{res['triangles'].shape[0]} PCL triangles"
+                f"{res['triangles'].shape[0]} PCL triangles, "
+                f"{cloud['rops_local_triangles'].shape[0]} local triangles"
             )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(args.out, **arrays)

@@ -11,10 +11,13 @@ support and projects the *support points*. relnav does the same. The mesh is (``
   triangulated clouds.
 * ``lrf="points"``: the point-based RoPS LRF (ALGORITHMS §A.4 fallback), relnav's former default.
 
-Neither of the last two equals PCL's RoPS (median correlation 0.93-0.95 on the fixture): the x
-axis (largest scatter eigenvalue) depends on which triangles cover the support, and PCL's greedy
-mesh leaves holes; PCL against itself with greedy-projection ``mu`` 4 instead of 2.5 gives the
-same 0.94-0.95 (``benchmarks/pcl_reference``).
+Given the same triangles, the default is PCL's RoPS: PCL's ``ROPSEstimation`` at each keypoint
+with that keypoint's local triangles (:func:`relnav.geometry.lrf.rops_local_mesh`) as its mesh
+correlates 1.0000 with the default on every keypoint of the fixture. Against PCL's RoPS on PCL's
+own greedy-projection mesh, the default and ``lrf="points"`` correlate 0.93-0.95 (median): the
+x axis (largest scatter eigenvalue) depends on which triangles cover the support, and PCL's
+greedy mesh leaves holes; PCL against itself with greedy-projection ``mu`` 4 instead of 2.5
+gives the same 0.94-0.95 (``benchmarks/pcl_reference``).
 
 For each keypoint ``p`` the support points (``‖q − p‖ ≤ r``, keypoint included) are expressed in
 the LRF, ``q' = LRF (q − p)``. For each axis ``a ∈ (x, y, z)`` and each angle
