@@ -59,6 +59,7 @@ def methods() -> None:
         t.add_row(escape(", ".join(meta["examples"])), escape(meta["description"]), avail)
     console.print(t)
     from relnav.odometry.budget import DEFAULT_BUDGET_TARGET, DEFAULT_POINT_BUDGET
+    from relnav.odometry.odometry import DEFAULT_DENSE_KEYPOINTS
 
     console.print(
         escape(
@@ -66,7 +67,10 @@ def methods() -> None:
             f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
             "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
             "every point); the navigator keeps max_points; the peers use their own range-based "
-            "downsampling on scans above 5000 points."
+            "downsampling on scans above 5000 points. Dense mode (beyond paper 1, reduced scans "
+            f"only): feature pipelines describe a seeded random {DEFAULT_DENSE_KEYPOINTS} points "
+            "of a reduced scan and their step is refined by point-to-plane ICP, the step check's "
+            "referee (-O dense_refine=off, dense_keypoints=None)."
         )
     )
     presets = Table(title="method presets (use the name with `relnav odometry --method`)")

@@ -192,7 +192,8 @@ def odometry(
         "Odometry options: motion_prior, initial_pose (gt | identity | 16 numbers), "
         "gate_rotation_deg, gate_translation, step_check (auto | off | referee | backward | "
         "full), step_tolerance_m, step_tolerance_deg, point_budget (None = every point), "
-        "budget_target, budget_sampler (random | voxel), budget_seed.",
+        "budget_target, budget_sampler (random | voxel), budget_seed, dense_refine (auto | on | "
+        "off), dense_keypoints (None = every point of a reduced scan).",
     ),
     strict: bool = typer.Option(
         False, "--strict", help="Abort on an unreadable scan (default: flag the frame, go on)."

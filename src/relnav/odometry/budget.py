@@ -13,7 +13,9 @@ max 4 296 points), so paper 1's results do not move; ``T`` = 3 000 is what keeps
 within 2× KISS-ICP's time on dense scans (measured at 30k points on a loaded 2-core machine:
 HoD-S/GCC/αβ 265 ms at 3 000 points, 454 ms at 4 000, 699 ms at 5 000; KISS-ICP 166 ms).
 A scan of 5 001 points therefore becomes 3 000: the budget is a switch between paper-1 clouds
-and sensor clouds, not a smooth cap.
+and sensor clouds, not a smooth cap. Feature pipelines then run in the odometry's dense mode
+(:mod:`relnav.odometry.odometry`: 1 000 of the 3 000 points described, the step refined by
+point-to-plane ICP on the 3 000).
 
 Two samplers:
 

@@ -17,6 +17,22 @@ An ``ok`` step of a pairwise method is then re-examined without ground truth
 (:mod:`relnav.odometry.step_check`: a point-to-plane referee started at the step and a
 forward–backward registration); a step they disagree with is ``flagged`` — kept in the chain,
 not trusted.
+
+**Dense mode (beyond paper 1; only for scans reduced by the point budget).** For a feature
+pipeline (``feature:...``, ``dense_refine="auto"``), a scan reduced by the point budget
+(:mod:`relnav.odometry.budget`, 3 000 points) is described at a seeded random 1 000 of its points
+(``dense_keypoints``; their neighbourhoods use all 3 000), and the pipeline's step is a *coarse*
+estimate refined by relnav's point-to-plane ICP on the two reduced scans, started at it (coarse
+to fine). That ICP is the step check's referee (:mod:`relnav.odometry.step_check`), run once:
+the check judges the COARSE step against it exactly as before (a coarse step the ICP moves by
+more than the step tolerance, or from which it fails, is ``flagged``). A doubtful coarse step
+(moved by more than the tolerance, or the ICP failed from it) gets a second ICP started at the
+motion prior, and the candidate with the higher fitness is kept; a step refined from the prior
+is always ``flagged``. The refined step replaces the coarse one when an ICP is ``ok``.
+``result.info`` records ``refine_status``, ``dense_refine`` (the ICP's move, fitness, start
+``"coarse"`` or ``"prior"``, the coarse ``T_coarse``) and ``dense_keypoints``;
+``result.timings["refine"]`` its cost. Scans at or below the budget never see any of it, so
+paper 1's pipeline and numbers are untouched (the same poses, bit for bit).
 """
 
 from __future__ import annotations
@@ -43,9 +59,12 @@ from relnav.registration.base import PreparedRegistration, Registration, get_reg
 from relnav.registration.result import RegistrationResult
 from relnav.scan import Scan
 
-__all__ = ["MotionPrior", "Odometry", "OdometryStep"]
+__all__ = ["DEFAULT_DENSE_KEYPOINTS", "MotionPrior", "Odometry", "OdometryStep"]
 
 log = logging.getLogger(__name__)
+
+DEFAULT_DENSE_KEYPOINTS = 1000
+"""Points a feature pipeline describes in a budget-reduced scan in dense mode."""
 
 MotionPrior = Literal["constant_velocity", "identity"]
 
@@ -132,6 +151,18 @@ class Odometry:
         subset by default, measured better than voxel centroids).
     budget_seed : int
         Seed of the random reduction; frame ``k`` draws with ``default_rng([budget_seed, k])``.
+    dense_refine : {"auto", "on", "off"} or bool
+        Refine a step between two budget-reduced scans by point-to-plane ICP on those scans,
+        started at the method's step (see the module docstring; a relnav extension beyond
+        paper 1, never applied to scans within the budget). ``"auto"`` (default): on for
+        feature pipelines (``feature:...``) without their own ``refine`` option, off for other
+        methods and for registration objects; ``"on"``: any method.
+    dense_keypoints : int or None
+        With the dense refinement on, a feature pipeline that describes every point
+        (``keypoints="all"``) describes only a seeded random ``dense_keypoints`` points of a
+        budget-reduced scan (default :data:`DEFAULT_DENSE_KEYPOINTS`; their neighbourhoods
+        still use the whole reduced scan, and the refinement uses every point of it).
+        ``None``: describe every point of the reduced scan.
     **method_options
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
@@ -151,10 +182,12 @@ class Odometry:
         budget_target: int | None = DEFAULT_BUDGET_TARGET,
         budget_sampler: str = "random",
         budget_seed: int = 0,
+        dense_refine: str | bool = "auto",
+        dense_keypoints: int | None = DEFAULT_DENSE_KEYPOINTS,
         **method_options: Any,
     ) -> None:
         from relnav.odometry.options import check_odometry_options, parse_initial_pose
-        from relnav.odometry.step_check import StepChecker, resolve_step_check
+        from relnav.odometry.step_check import StepChecker, make_referee, resolve_step_check
 
         opts = check_odometry_options(
             {
@@ -193,6 +226,19 @@ class Odometry:
         if isinstance(budget_seed, bool) or not isinstance(budget_seed, int | np.integer):
             raise ConfigError(f"budget_seed must be an integer, got {budget_seed!r}")
         self.budget_seed = int(budget_seed)
+        self.dense_refine = _resolve_dense_refine(dense_refine, method, method_options)
+        self.dense_keypoints = check_point_budget(
+            None if str(dense_keypoints).strip().lower() in ("none", "null") else dense_keypoints,
+            "dense_keypoints",
+        )
+        self._refiner: Any = None
+        self._tolerance_m = _number("step_tolerance_m", step_tolerance_m)
+        self._tolerance_rad = float(np.radians(_number("step_tolerance_deg", step_tolerance_deg)))
+        if self.dense_refine:
+            if self.step_checker is not None and self.step_checker.uses_referee:
+                self._refiner = self.step_checker.referee  # one ICP: refinement and referee
+            else:
+                self._refiner = make_referee()
         self.motion_prior: MotionPrior = opts.motion_prior
         g_rot, g_t = opts.gate_rotation_deg, opts.gate_translation
         self.gate_rotation = None if g_rot is None else float(np.radians(g_rot))
@@ -202,6 +248,7 @@ class Odometry:
         self._prev_points: np.ndarray | None = None
         self._prev_prepared: Any = None
         self._prev_referee: Any = None
+        self._prev_refine_cloud: Any = None
         self._prev_reach = 0.0
         self._anchor_pose = self.pose.copy()
         self._gap = 0
@@ -242,15 +289,28 @@ class Odometry:
         )
         prepared = None
         prepare_error = ""
+        dense_kp = self._dense_keypoints(points) if budget.reduced else None
         if isinstance(self.registration, PreparedRegistration):
             try:
-                prepared = self.registration.prepare(points)
+                if dense_kp is not None:  # a FeatureRegistration (see _dense_keypoints)
+                    prepare: Any = self.registration.prepare
+                    prepared = prepare(points, keypoints=dense_kp)
+                else:
+                    prepared = self.registration.prepare(points)
             except Exception as e:  # a bad scan must not stop the run
                 log.warning("frame %d: preparation failed: %s", self.n_frames, e)
                 prepare_error = f"{type(e).__name__}: {e}"
         referee = None
         if self.step_checker is not None and not prepare_error:
             referee = self.step_checker.prepare(points)
+        refine_cloud = None  # the dense refinement's per-scan data (reduced scans only)
+        if self._refiner is not None and budget.reduced and not prepare_error:
+            if referee is not None:
+                refine_cloud = referee
+            else:
+                from relnav.odometry.step_check import prepare_referee
+
+                refine_cloud = prepare_referee(self._refiner, points)
         if self.n_frames == 0:
             out = OdometryStep(
                 self.pose.copy(),
@@ -281,10 +341,15 @@ class Odometry:
                     "seed": [self.budget_seed, self.n_frames],
                 }
                 result.timings["budget"] = budget.time_s
+                if dense_kp is not None:
+                    result.info["dense_keypoints"] = int(dense_kp.size)
             if result.status == "ok":
                 self._check_plausible(result, reach)
             if result.status == "ok":
                 self._apply_gate(result, prior)
+            refined = adopted = None
+            if result.status == "ok" and budget.reduced and self._refiner is not None:
+                refined, adopted = self._refine(result, refine_cloud, referee is None, prior)
             if result.status == "ok" and self.step_checker is not None:
                 self.step_checker.judge(
                     result,
@@ -294,7 +359,17 @@ class Odometry:
                     target_prepared=self._prev_prepared,
                     source_referee=referee,
                     target_referee=self._prev_referee,
+                    referee_result=refined,
                 )
+            if adopted is not None and result.status in ("ok", "flagged"):
+                result.T_target_source = adopted.T_target_source.copy()
+                result.covariance = adopted.covariance
+                if adopted is not refined and result.status == "ok":  # no check flagged it
+                    result.status = "flagged"  # type: ignore[assignment]
+                    result.message = (
+                        "step not trusted: the method's step was doubtful; refined from the "
+                        "motion prior instead"
+                    )
             used_prior = result.status not in ("ok", "flagged")
             if used_prior:
                 step = self.prior_step
@@ -328,6 +403,7 @@ class Odometry:
         self._prev_points = points
         self._prev_prepared = prepared
         self._prev_referee = referee
+        self._prev_refine_cloud = refine_cloud
         self._prev_reach = reach
         self._anchor_pose = self.pose.copy()
         self._gap = 0
@@ -399,6 +475,93 @@ class Odometry:
             )
             result.info["gated"] = True
 
+    def _dense_keypoints(self, points: np.ndarray) -> np.ndarray | None:
+        """The points a feature pipeline describes in a budget-reduced scan: a seeded random
+        ``dense_keypoints`` of them (``default_rng([budget_seed, k, 1])`` for frame ``k``,
+        sorted), or None (describe as the method says: dense mode off, not a feature pipeline
+        with ``keypoints="all"``, or the scan is not larger)."""
+        from relnav.registration.feature import FeatureRegistration
+
+        K = self.dense_keypoints
+        reg = self.registration
+        if (
+            K is None
+            or not self.dense_refine
+            or not isinstance(reg, FeatureRegistration)
+            or reg.keypoint_method != "all"
+            or len(points) <= K
+        ):
+            return None
+        rng = np.random.default_rng([self.budget_seed, self.n_frames, 1])
+        return np.sort(rng.choice(len(points), size=K, replace=False)).astype(np.int64)
+
+    def _refine(
+        self, result: RegistrationResult, cloud: Any, count_prepare: bool, prior: np.ndarray
+    ) -> tuple[RegistrationResult | None, RegistrationResult | None]:
+        """The dense refinement of an ``ok`` step between two budget-reduced scans.
+
+        Point-to-plane ICP started at the method's (coarse) step. When it fails from there or
+        moves the step by more than the step tolerance (the coarse step is doubtful: the step
+        check will flag it), the same ICP is also started at the motion ``prior`` and the
+        candidate with the higher fitness (inliers / source points; ties: lower inlier RMSE)
+        is kept. Records ``info["refine_status"]``, ``info["dense_refine"]`` and
+        ``timings["refine"]`` (s; with the current scan's ICP preparation when
+        ``count_prepare``, i.e. when the step check does not count it).
+
+        Returns
+        -------
+        judged : RegistrationResult or None
+            The ICP started at the coarse step (the step check's referee); None when one of
+            the scans has no refinement data.
+        adopted : RegistrationResult or None
+            The refinement to adopt (``ok``), or None (keep the coarse step).
+        """
+        prev = self._prev_refine_cloud
+        if cloud is None or prev is None:
+            result.info["refine_status"] = "skipped"
+            result.info["dense_refine"] = {"message": "no refinement data for one of the scans"}
+            return None, None
+        t0 = time.perf_counter()
+        T = np.asarray(result.T_target_source, dtype=np.float64)
+        ref = self._run_refiner(cloud, prev, T)
+        record: dict[str, Any] = {"method": self._refiner.name, "status": ref.status}
+        adopted = ref if ref.status == "ok" else None
+        doubtful = True
+        if ref.status == "ok":
+            d_rot, d_t = _step_difference(T, ref.T_target_source)
+            record.update(rot_deg=float(np.degrees(d_rot)), t=d_t, fitness=ref.fitness)
+            doubtful = d_rot > self._tolerance_rad or d_t > self._tolerance_m
+        else:
+            record["message"] = ref.message
+        record["start"] = "coarse"
+        if doubtful:  # a second start at the motion prior
+            alt = self._run_refiner(cloud, prev, prior)
+            record["prior_status"] = alt.status
+            if alt.status == "ok":
+                record["prior_fitness"] = alt.fitness
+                if adopted is None or (alt.fitness, -alt.inlier_rmse) > (
+                    adopted.fitness,
+                    -adopted.inlier_rmse,
+                ):
+                    adopted = alt
+                    record["start"] = "prior"
+        record["T_coarse"] = T.copy()
+        dt = time.perf_counter() - t0 + (cloud.time_s if count_prepare else 0.0)
+        result.timings["refine"] = result.timings.get("refine", 0.0) + dt
+        result.info["refine_status"] = "ok" if adopted is not None else ref.status
+        result.info["dense_refine"] = record
+        return ref, adopted
+
+    def _run_refiner(self, cloud: Any, prev: Any, init: np.ndarray) -> RegistrationResult:
+        """The refinement ICP from ``init``; a raised error becomes a ``failed`` result."""
+        try:
+            return self._refiner.register_prepared(cloud.cloud, prev.cloud, init=init)
+        except Exception as e:  # the refinement must never stop the run
+            log.warning(
+                "frame %d: dense refinement raised %s: %s", self.n_frames, type(e).__name__, e
+            )
+            return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
     def _register(
         self, points: np.ndarray, prepared: Any, prepare_error: str, prior: np.ndarray
     ) -> RegistrationResult:
@@ -442,6 +605,31 @@ def _resolve_budget(budget: int | str | None, method: str | Registration) -> int
         meta = available_methods().get(method.partition(":")[0].strip().lower())
         return DEFAULT_POINT_BUDGET if meta is not None and meta["extra"] is None else None
     return check_point_budget(budget)
+
+
+def _step_difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
+    """Rotation angle (rad) of ``A⁻¹ B`` and the distance (m) between the translations."""
+    D = invert(A) @ B
+    return rotation_angle(D[:3, :3]), float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
+
+
+def _resolve_dense_refine(
+    mode: str | bool, method: str | Registration, options: dict[str, Any]
+) -> bool:
+    """Whether the dense refinement runs (see :class:`Odometry`); ConfigError if invalid."""
+    if isinstance(mode, bool):
+        return mode
+    m = str(mode).strip().lower()
+    if m in ("on", "true", "yes"):
+        return True
+    if m in ("off", "false", "no", "none"):
+        return False
+    if m != "auto":
+        raise ConfigError(f"dense_refine must be 'auto', 'on' or 'off', got {mode!r}")
+    if not isinstance(method, str):
+        return False
+    family = method.strip().lower().partition(":")[0]
+    return family == "feature" and not options.get("refine")
 
 
 def _reach(points: np.ndarray) -> float:

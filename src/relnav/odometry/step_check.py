@@ -42,9 +42,12 @@ from relnav.registration.result import RegistrationResult
 
 __all__ = [
     "CHECKED_FAMILIES",
+    "REFEREE_MAX_ITER",
     "STEP_CHECK_MODES",
     "StepCheckMode",
     "StepChecker",
+    "make_referee",
+    "prepare_referee",
     "resolve_step_check",
 ]
 
@@ -59,6 +62,9 @@ sequences) and for feature pipelines (their second registration doubles the time
 forward–backward for point-to-plane ICP and for feature pipelines refined by ICP (preset
 ``extended``), where a point-to-plane referee would repeat the method; ``off`` for other
 methods."""
+
+REFEREE_MAX_ITER = 30
+"""Iterations of the point-to-plane referee (at most)."""
 
 CHECKED_FAMILIES: dict[str, str] = {
     "icp-point": "full",
@@ -145,8 +151,6 @@ class StepChecker:
         referee_factor: float = 1.0,
         loop_factor: float = 0.7,
     ) -> None:
-        from relnav.registration.icp import ICP
-
         if mode not in ("referee", "backward", "full"):
             raise ConfigError(
                 f"StepChecker mode must be 'referee', 'backward' or 'full', got {mode!r}"
@@ -165,7 +169,7 @@ class StepChecker:
         self.tolerance_rad = math.radians(float(tolerance_deg))
         self.referee_factor = float(referee_factor)
         self.loop_factor = float(loop_factor)
-        self.referee = ICP("plane", max_iter=30)
+        self.referee = make_referee()
         self.uses_referee = mode in ("referee", "full")
         self.uses_backward = mode in ("backward", "full")
 
@@ -174,13 +178,7 @@ class StepChecker:
         or the referee is not used."""
         if not self.uses_referee:
             return None
-        t0 = time.perf_counter()
-        try:
-            cloud = self.referee.prepare(points)
-        except Exception as e:  # a bad scan is judged by the method, not here
-            log.debug("step check: referee preparation failed: %s", e)
-            return None
-        return _Referee(cloud, time.perf_counter() - t0) if cloud.ok else None
+        return prepare_referee(self.referee, points)
 
     def judge(
         self,
@@ -192,6 +190,7 @@ class StepChecker:
         target_prepared: Any = None,
         source_referee: _Referee | None = None,
         target_referee: _Referee | None = None,
+        referee_result: RegistrationResult | None = None,
     ) -> None:
         """Check an ``ok`` result (in place): status ``flagged`` with the reason in
         ``message``; the figures go to ``result.info["step_check"]`` and the time (this call
@@ -199,6 +198,9 @@ class StepChecker:
 
         ``source`` is the current scan, ``target`` the previous one (sensor frames, m);
         ``*_prepared`` are the method's per-scan data (:class:`PreparedRegistration`).
+        ``referee_result``: the referee already run from the step on the same two scans (the
+        odometry's dense refinement, :mod:`relnav.odometry.odometry`); it is judged instead
+        of running the referee again (the referee check then needs no ``*_referee`` data).
         """
         if result.status != "ok":
             return
@@ -206,8 +208,13 @@ class StepChecker:
         T = np.asarray(result.T_target_source, dtype=np.float64)
         info: dict[str, Any] = {"mode": self.mode}
         reasons: list[str] = []
-        if source_referee is not None and target_referee is not None:
+        ref: RegistrationResult | None = None
+        if self.uses_referee and referee_result is not None:
+            ref = referee_result
+            info["referee_shared"] = True
+        elif source_referee is not None and target_referee is not None:
             ref = self.referee.register_prepared(source_referee.cloud, target_referee.cloud, init=T)
+        if ref is not None:
             info["referee_status"] = ref.status
             if ref.status == "ok":
                 d_rot, d_t = _difference(T, ref.T_target_source)
@@ -266,6 +273,26 @@ class StepChecker:
         except Exception as e:  # the check must never stop the run
             log.debug("step check: backward registration raised %s", e)
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
+
+def make_referee() -> Registration:
+    """The referee: point-to-plane ICP (:class:`relnav.registration.icp.ICP`, scale-aware
+    thresholds) with at most :data:`REFEREE_MAX_ITER` iterations."""
+    from relnav.registration.icp import ICP
+
+    return ICP("plane", max_iter=REFEREE_MAX_ITER)
+
+
+def prepare_referee(referee: Registration, points: np.ndarray) -> _Referee | None:
+    """Per-scan data of a point-to-plane ``referee`` (normals, KD-tree) and its cost, or None
+    when the scan is unusable (a bad scan is judged by the method, not here)."""
+    t0 = time.perf_counter()
+    try:
+        cloud = referee.prepare(points)  # type: ignore[attr-defined]
+    except Exception as e:
+        log.debug("step check: referee preparation failed: %s", e)
+        return None
+    return _Referee(cloud, time.perf_counter() - t0) if cloud.ok else None
 
 
 def _difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:

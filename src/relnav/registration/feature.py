@@ -178,15 +178,32 @@ class FeatureRegistration:
             ) from None
 
     # ------------------------------------------------------------------ per-cloud work
-    def prepare(self, points: np.ndarray, *, radius: float | None = None) -> CloudFeatures:
+    def prepare(
+        self,
+        points: np.ndarray,
+        *,
+        radius: float | None = None,
+        keypoints: np.ndarray | None = None,
+    ) -> CloudFeatures:
         """Resolution, keypoints, normals and descriptors of one cloud.
 
-        ``radius`` (m) overrides ``radius_factor · Tr``.
+        ``radius`` (m) overrides ``radius_factor · Tr``. ``keypoints`` ((K,) int, indices into
+        ``points``) overrides the keypoint selection: only those points are described (indices
+        of non-finite points dropped), their neighbourhoods still use the whole cloud (the
+        odometry's dense mode, :class:`relnav.odometry.Odometry` ``dense_keypoints``).
         """
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        P = P[np.isfinite(P).all(axis=1)]
+        finite = np.isfinite(P).all(axis=1)
+        if keypoints is not None:
+            keypoints = np.asarray(keypoints, dtype=np.int64).reshape(-1)
+            if keypoints.size and (keypoints.min() < 0 or keypoints.max() >= P.shape[0]):
+                raise ConfigError(f"keypoints must index the {P.shape[0]} points")
+            if not finite.all():
+                new_index = np.cumsum(finite) - 1
+                keypoints = new_index[keypoints[finite[keypoints]]]
+        P = P[finite]
         tr = mean_resolution(P) if P.shape[0] >= 2 else float("nan")
         timings["resolution"] = time.perf_counter() - t0
         if P.shape[0] < self.min_points or not np.isfinite(tr) or tr <= 0:
@@ -194,7 +211,9 @@ class FeatureRegistration:
             return CloudFeatures(P, tr, float("nan"), np.zeros(0, np.int64), empty, timings)
         r = float(radius) if radius is not None else self.radius_factor * tr
         t0 = time.perf_counter()
-        if self.keypoint_method == "all":
+        if keypoints is not None:
+            kp = keypoints
+        elif self.keypoint_method == "all":
             kp = np.arange(P.shape[0], dtype=np.int64)
         else:
             from relnav.features.keypoints import select_keypoints
@@ -242,7 +261,7 @@ class FeatureRegistration:
             and target.radius != source.radius
             and target.points.shape[0] >= self.min_points
         ):
-            target = self.prepare(target.points, radius=source.radius)
+            target = self.prepare(target.points, radius=source.radius, keypoints=target.keypoints)
         timings = dict(source.timings)
         n_src, n_tgt = source.points.shape[0], target.points.shape[0]
         info: dict[str, Any] = {"n_source": n_src, "n_target": n_tgt}
