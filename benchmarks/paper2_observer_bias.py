@@ -12,6 +12,8 @@ started AT THE TRUE POSE, and the observation error is measured directly in the 
   (the error is then that of one frame → model registration, none inherited);
 * ``camera-true-merges-no-back`` — and the frame points whose nearest model point was seen
   from the other side of the surface (thin two-sided structures) are dropped;
+* ``camera-true-merges-overlap`` — true merges, and the frame points farther than
+  ``OVERLAP_VOXELS`` voxels from the model at the true pose (surfaces not modelled yet) dropped;
 * ``camera-no-back`` — the same exclusion with the normal merges; ``clustered-cga-no-back``
   the same on the observer's chain;
 * ``camera-no-back-merge`` — frames with more than ``BACK_MERGE_LIMIT`` back-face matches are
@@ -24,14 +26,17 @@ started AT THE TRUE POSE, and the observation error is measured directly in the 
   model's own constant-velocity prediction (and its CGA global start at frame 1), as without a
   filter.
 
-``--trace STAGE`` prints that stage's per-frame error on the first sequence in the sensor
-frame and in the model (body) axes: an error inherited through the merges is constant in body
-axes and turns with the target in the sensor frame. ``--per-frame`` prints per frame the
-fraction of the frame's points whose nearest model point (the model built at the true poses)
-is a back face, and the error of one registration onto that model.
+``--noiseless SEQ2`` (the same seed simulated without depth noise) registers each frame once
+onto a model merged at the true poses, with model and frame each noisy or noiseless: which
+side's noise moves the one-registration error. ``--trace STAGE`` prints that stage's
+per-frame error on the first sequence in the sensor frame and in the model (body) axes: an
+error inherited through the merges is constant in body axes and turns with the target in the
+sensor frame. ``--per-frame`` prints per frame the fraction of the frame's points whose
+nearest model point (the model built at the true poses) is a back face, and the error of one
+registration onto that model.
 
 Run: ``python benchmarks/paper2_observer_bias.py SEQ [SEQ ...] [--stages a,b] [--trace STAGE]
-[--per-frame]``
+[--per-frame] [--noiseless SEQ2]``
 with SEQ a sequence folder (``--work DIR`` of paper2_experiment.py, e.g.
 ``DIR/seq000_sensors.0.overrides.quantize-false_sensors.0.overrides.sigma_coeff-0``).
 """
@@ -57,6 +62,7 @@ STAGES = {
     "camera": dict(cloud="camera"),
     "camera-true-merges": dict(cloud="camera", true_merge=True),
     "camera-true-merges-no-back": dict(cloud="camera", true_merge=True, no_back=True),
+    "camera-true-merges-overlap": dict(cloud="camera", true_merge=True, overlap=True),
     "camera-no-back": dict(cloud="camera", no_back=True),
     "camera-no-back-merge": dict(cloud="camera", skip_back_merge=True),
     "clustered-cga-no-back": dict(cloud="clustered", cga=True, no_back=True),
@@ -68,6 +74,9 @@ STAGES = {
 }
 
 
+OVERLAP_VOXELS = 2.0
+"""``camera-true-merges-overlap``: frame points farther than this many voxels from the model
+(at the true pose) — surfaces the model does not hold yet — are dropped."""
 BACK_MERGE_LIMIT = 0.2
 """``camera-no-back-merge``: frames with more back-face matches than this are not merged."""
 
@@ -107,9 +116,16 @@ class _DiagnosticModel(ContourModel):
     """ContourModel that can merge at the true pose and drop back-face points (truth-fed)."""
 
     def __init__(
-        self, *, true_merge: bool, no_back: bool, seed: int, skip_back_merge: bool = False
+        self,
+        *,
+        true_merge: bool,
+        no_back: bool,
+        seed: int,
+        skip_back_merge: bool = False,
+        overlap: bool = False,
     ) -> None:
         super().__init__(seed=seed)
+        self.overlap = overlap
         self.true_merge = true_merge
         self.no_back = no_back
         self.skip_back_merge = skip_back_merge
@@ -135,6 +151,9 @@ class _DiagnosticModel(ContourModel):
         if self.no_back and self._store is not None:
             Qm = transform_points(self.T_true, Q)
             Q = Q[~back_facing(Qm, self.T_true[:3, 3], *self._store)]
+        if self.overlap and self._store is not None and self._voxel is not None:
+            d, _ = cKDTree(self._model).query(transform_points(self.T_true, Q))
+            Q = Q[d <= OVERLAP_VOXELS * self._voxel]
         return Q
 
 
@@ -148,6 +167,7 @@ def run_stage(seq: Path, stage: str, seed: int) -> np.ndarray:
         true_merge=bool(opts.get("true_merge")),
         no_back=bool(opts.get("no_back")),
         skip_back_merge=bool(opts.get("skip_back_merge")),
+        overlap=bool(opts.get("overlap")),
         seed=seed,
     )
     errs = []
@@ -207,12 +227,48 @@ def per_frame_back_faces(seq: Path) -> list[tuple[int, float, np.ndarray]]:
     return out
 
 
+def noise_split(noisy: Path, clean: Path) -> list[tuple[str, str, np.ndarray]]:
+    """One registration per frame onto a model merged at the true poses, with the model and the
+    frame each taken from the noisy or the noiseless sequence (same geometry and poses).
+
+    Returns ``(model, frame, errors (K - 1, 3))`` per combination; errors of the reference point
+    ``b`` = the noisy first frame's centroid, sensor frame, m.
+    """
+    from relnav.features.keypoints import voxel_downsample
+    from relnav.geometry.neighbors import mean_resolution
+    from relnav.registration import get_registration
+
+    seqs = {"noisy": ScanSequence(noisy), "noiseless": ScanSequence(clean)}
+    g = seqs["noisy"].gt_poses
+    T = [invert(g[0]) @ g[k] for k in range(len(g))]
+    vox = 2.0 * mean_resolution(seqs["noisy"][0].points)
+    b = seqs["noisy"][0].points.mean(axis=0)
+    out = []
+    for m_name, m_seq in seqs.items():
+        for f_name, f_seq in seqs.items():
+            errs = []
+            model = np.zeros((0, 3))
+            for k in range(len(g)):
+                if k > 0:
+                    src = voxel_downsample(f_seq[k].points, vox)
+                    r = get_registration("icp-point", max_iter=50).register(src, model, init=T[k])
+                    Te, Tt = invert(r.T_target_source), invert(T[k])
+                    errs.append((Te[:3, :3] @ b + Te[:3, 3]) - (Tt[:3, :3] @ b + Tt[:3, 3]))
+                Pm = transform_points(T[k], m_seq[k].points)
+                model = voxel_downsample(np.vstack([model, Pm]), vox)
+            out.append((m_name, f_name, np.asarray(errs)))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("seqs", type=Path, nargs="+")
     ap.add_argument("--stages", default=",".join(STAGES), help="comma-separated, '' = none")
     ap.add_argument("--per-frame", action="store_true", help="also the per-frame back faces")
     ap.add_argument("--trace", default=None, help="per-frame errors of this stage")
+    ap.add_argument(
+        "--noiseless", type=Path, default=None, help="noiseless twin of the first SEQ: noise split"
+    )
     args = ap.parse_args()
     mm = lambda v: ", ".join(f"{1e3 * x:+.2f}" for x in v)  # noqa: E731
     print("| stage | mean error x, y, z (mm, sensor) | RMS x, y, z (mm) | mean attitude (deg) |")
@@ -237,6 +293,12 @@ def main() -> None:
         for k in range(1, len(g)):
             R_S_M = (invert(g[k]) @ g[0])[:3, :3]
             print(f"| {k} | {mm(E[k - 1, :3])} | {mm(R_S_M.T @ E[k - 1, :3])} |")
+    if args.noiseless is not None:
+        print("\n| model | frame | mean error x, y, z (mm, sensor) | RMS x, y, z (mm) |")
+        print("|---|---|---|---|")
+        for m_name, f_name, E in noise_split(args.seqs[0], args.noiseless):
+            rms = np.sqrt(np.mean(E**2, axis=0))
+            print(f"| {m_name} | {f_name} | {mm(E.mean(axis=0))} | {mm(rms)} |", flush=True)
     if args.per_frame:
         print("\n| frame | back-face nearest neighbours | one-registration error x, y, z (mm) |")
         print("|---|---|---|")
