@@ -516,6 +516,8 @@ class Odometry:
         adopted : RegistrationResult or None
             The refinement to adopt (``ok``), or None (keep the coarse step).
         """
+        from relnav.odometry.step_check import step_difference
+
         prev = self._prev_refine_cloud
         if cloud is None or prev is None:
             result.info["refine_status"] = "skipped"
@@ -528,7 +530,7 @@ class Odometry:
         adopted = ref if ref.status == "ok" else None
         doubtful = True
         if ref.status == "ok":
-            d_rot, d_t = _step_difference(T, ref.T_target_source)
+            d_rot, d_t = step_difference(T, ref.T_target_source)
             record.update(rot_deg=float(np.degrees(d_rot)), t=d_t, fitness=ref.fitness)
             doubtful = d_rot > self._tolerance_rad or d_t > self._tolerance_m
         else:
@@ -605,12 +607,6 @@ def _resolve_budget(budget: int | str | None, method: str | Registration) -> int
         meta = available_methods().get(method.partition(":")[0].strip().lower())
         return DEFAULT_POINT_BUDGET if meta is not None and meta["extra"] is None else None
     return check_point_budget(budget)
-
-
-def _step_difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
-    """Rotation angle (rad) of ``A⁻¹ B`` and the distance (m) between the translations."""
-    D = invert(A) @ B
-    return rotation_angle(D[:3, :3]), float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
 
 
 def _resolve_dense_refine(

@@ -49,6 +49,7 @@ __all__ = [
     "make_referee",
     "prepare_referee",
     "resolve_step_check",
+    "step_difference",
 ]
 
 log = logging.getLogger(__name__)
@@ -217,7 +218,7 @@ class StepChecker:
         if ref is not None:
             info["referee_status"] = ref.status
             if ref.status == "ok":
-                d_rot, d_t = _difference(T, ref.T_target_source)
+                d_rot, d_t = step_difference(T, ref.T_target_source)
                 info["referee_rot_deg"] = math.degrees(d_rot)
                 info["referee_t"] = d_t
                 f = self.referee_factor
@@ -295,7 +296,7 @@ def prepare_referee(referee: Registration, points: np.ndarray) -> _Referee | Non
     return _Referee(cloud, time.perf_counter() - t0) if cloud.ok else None
 
 
-def _difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
+def step_difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
     """Rotation angle (rad) of ``A⁻¹ B`` and the distance (m) between the translations."""
     D = invert(A) @ B
     return rotation_angle(D[:3, :3]), float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
