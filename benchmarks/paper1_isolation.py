@@ -91,6 +91,15 @@ def _eps(factor: float) -> dict[str, Any]:
     return {"grouper_options": {"epsilon_factor": factor}}
 
 
+_HPR_VARIANTS = {
+    "preset (σ 1 cm, ε = 2·Tr)": Variant(),
+    "no noise": Variant({_HPR_SIGMA: 0.0}),
+    "ε = 1·Tr": Variant(feature_options=_eps(1.0)),
+    "ε = 0.5·Tr": Variant(feature_options=_eps(0.5)),
+    "ε = 0.25·Tr": Variant(feature_options=_eps(0.25)),
+}
+"""Changes tried on the two HPR scenarios (Sim-Orion, Sim-Bennu)."""
+
 SCENARIOS: dict[str, tuple[list[str], dict[str, Variant]]] = {
     "real-fb": (
         _VLP16_METHODS,
@@ -118,26 +127,8 @@ SCENARIOS: dict[str, tuple[list[str], dict[str, Variant]]] = {
             ),
         },
     ),
-    "sim-orion": (
-        _HPR_METHODS,
-        {
-            "preset (σ 1 cm, ε = 2·Tr)": Variant(),
-            "no noise": Variant({_HPR_SIGMA: 0.0}),
-            "ε = 1·Tr": Variant(feature_options=_eps(1.0)),
-            "ε = 0.5·Tr": Variant(feature_options=_eps(0.5)),
-            "ε = 0.25·Tr": Variant(feature_options=_eps(0.25)),
-        },
-    ),
-    "sim-bennu": (
-        _HPR_METHODS,
-        {
-            "preset (σ 1 cm, ε = 2·Tr)": Variant(),
-            "no noise": Variant({_HPR_SIGMA: 0.0}),
-            "ε = 1·Tr": Variant(feature_options=_eps(1.0)),
-            "ε = 0.5·Tr": Variant(feature_options=_eps(0.5)),
-            "ε = 0.25·Tr": Variant(feature_options=_eps(0.25)),
-        },
-    ),
+    "sim-orion": (_HPR_METHODS, _HPR_VARIANTS),
+    "sim-bennu": (_HPR_METHODS, _HPR_VARIANTS),
 }
 
 PAPER_BEST = {

@@ -203,21 +203,22 @@ class Odometry:
             get_registration(method, **method_options) if isinstance(method, str) else method
         )
         check = resolve_step_check(step_check, method, method_options)
+        tolerance_m = _number("step_tolerance_m", step_tolerance_m)
+        tolerance_deg = _number("step_tolerance_deg", step_tolerance_deg)
+        self._tolerance_m = tolerance_m
+        self._tolerance_rad = float(np.radians(tolerance_deg))
         self.step_checker: StepChecker | None = (
             None
             if check == "off"
             else StepChecker(
                 self.registration,
                 check,  # type: ignore[arg-type]
-                tolerance_m=_number("step_tolerance_m", step_tolerance_m),
-                tolerance_deg=_number("step_tolerance_deg", step_tolerance_deg),
+                tolerance_m=tolerance_m,
+                tolerance_deg=tolerance_deg,
             )
         )
         self.point_budget = _resolve_budget(point_budget, method)
-        self.budget_target = check_point_budget(
-            None if str(budget_target).strip().lower() in ("none", "null") else budget_target,
-            "budget_target",
-        )
+        self.budget_target = _optional_count(budget_target, "budget_target")
         if budget_sampler not in SAMPLERS:
             raise ConfigError(
                 f"budget_sampler must be one of {', '.join(SAMPLERS)}, got {budget_sampler!r}"
@@ -227,13 +228,8 @@ class Odometry:
             raise ConfigError(f"budget_seed must be an integer, got {budget_seed!r}")
         self.budget_seed = int(budget_seed)
         self.dense_refine = _resolve_dense_refine(dense_refine, method, method_options)
-        self.dense_keypoints = check_point_budget(
-            None if str(dense_keypoints).strip().lower() in ("none", "null") else dense_keypoints,
-            "dense_keypoints",
-        )
+        self.dense_keypoints = _optional_count(dense_keypoints, "dense_keypoints")
         self._refiner: Any = None
-        self._tolerance_m = _number("step_tolerance_m", step_tolerance_m)
-        self._tolerance_rad = float(np.radians(_number("step_tolerance_deg", step_tolerance_deg)))
         if self.dense_refine:
             if self.step_checker is not None and self.step_checker.uses_referee:
                 self._refiner = self.step_checker.referee  # one ICP: refinement and referee
@@ -580,6 +576,13 @@ class Odometry:
         except Exception as e:  # never let one frame stop the run; flag it
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             return RegistrationResult(status="failed", message=f"{type(e).__name__}: {e}")
+
+
+def _optional_count(value: Any, name: str) -> int | None:
+    """:func:`check_point_budget` of ``value``; the command line's ``None``/``null`` is None."""
+    return check_point_budget(
+        None if str(value).strip().lower() in ("none", "null") else value, name
+    )
 
 
 def _number(name: str, value: Any) -> float:
