@@ -1,6 +1,7 @@
 """The full relative state on tumbling-target sequences: angular-rate accuracy and consistency.
 
-    python benchmarks/nav_state.py --out bench/nav            # envisat-tumble-64, aura-tumble-64
+    python benchmarks/nav_state.py --out bench/nav              # envisat-tumble-64, aura-tumble-64
+    python benchmarks/nav_state.py --out bench/nav --seeds 20   # Monte Carlo over noise seeds
 
 Runs ``relnav`` on the navigation suite's tumbling sequences (simulated once into
 ``OUT/sequences`` by ``benchmarks/nav_suite.py``'s definitions), feeds its poses to paper 2's
@@ -8,6 +9,13 @@ twistor UKF (:func:`relnav.navigation.state.relative_state`) and prints, after t
 the frames (convergence): the angular-rate error (median, 95th percentile, max, deg/s), the
 attitude/position/velocity RMS errors, and the mean NEES of the full 12-dim state and of its
 rates (velocity + angular rate) beside their 95 % bands.
+
+With ``--seeds N`` each sequence is simulated again with N noise seeds (1000 … 1000 + N − 1;
+same target, path and sensor) and the NEES is tested as a Monte Carlo test should be: per time
+step, the NEES averaged over the N runs against the 95 % band of such an average (the fraction
+of steps inside it), and the pooled mean NEES of each 3-dim block (position, velocity,
+attitude, angular rate; 3 when consistent). One run's time average is not a fair test: its
+errors are correlated from step to step (the navigator's map drift), so its band is too narrow.
 """
 
 from __future__ import annotations
@@ -20,9 +28,27 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import simulate_suite
+from nav_suite import holdout, suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
+BLOCKS = ("position", "velocity", "attitude", "omega")
+
+
+def block_nees(res, k0: int) -> np.ndarray:
+    """NEES per step from ``k0`` of the four 3-dim blocks and of the whole 12-dim state,
+    ``(K - k0, 5)`` (NaN where an error is not finite)."""
+    e = res.errors()
+    err = np.concatenate([e[b] for b in BLOCKS], axis=1)
+    out = np.full((len(err) - k0, 5), np.nan)
+    for i, k in enumerate(range(k0, len(err))):
+        if not np.all(np.isfinite(err[k])):
+            continue
+        C = res.covariance[k][:12, :12]
+        for b in range(4):
+            s = slice(3 * b, 3 * b + 3)
+            out[i, b] = err[k, s] @ np.linalg.solve(C[s, s], err[k, s])
+        out[i, 4] = err[k] @ np.linalg.solve(C, err[k])
+    return out
 
 
 def rate_nees(res, k0: int) -> np.ndarray:
@@ -38,45 +64,104 @@ def rate_nees(res, k0: int) -> np.ndarray:
     return np.asarray(out)
 
 
-def main(argv: list[str] | None = None) -> int:
+def simulate_seeds(out: Path, name: str, seeds: int) -> list[Path]:
+    """Simulate ``name`` with noise seeds 1000 … (cached in ``out/sequences/NAME-mcS``)."""
+    from relnav.sim.scenario import simulate
+
+    every = {**suite(), **holdout()}
+    folders = []
+    for s in range(seeds):
+        d = out / "sequences" / f"{name}-mc{s}"
+        if not (d / "scenario.yaml").exists():
+            simulate({**every[name], "name": f"{name}-mc{s}", "seed": 1000 + s}, d, overwrite=True)
+        folders.append(d)
+    return folders
+
+
+def track(folder: Path):
+    """``relnav`` on one sequence and the relative state from its poses."""
     from relnav.io.sequences import ScanSequence
-    from relnav.navigation.state import nees_band, relative_state
+    from relnav.navigation.state import relative_state
     from relnav.odometry import run_sequence
+
+    seq = ScanSequence(folder)
+    run = run_sequence(seq, "relnav")
+    return relative_state(run, gt_poses=seq.gt_poses)
+
+
+def report_single(name: str, res) -> None:
+    from relnav.navigation.state import nees_band
+
+    k0 = round(0.3 * len(res))
+    w = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
+    s = res.summary(skip=0.3)
+    full = res.nees()[k0:]
+    full = full[np.isfinite(full)]
+    rates = rate_nees(res, k0)
+    rate_true = np.degrees(np.median(np.linalg.norm(res.truth.omega, axis=1)))
+    print(f"{name}: true rate {rate_true:.2f} deg/s; after {k0} of {len(res)} frames:")
+    print(
+        f"  angular-rate error deg/s: median {np.median(w):.3f}  p95 "
+        f"{np.percentile(w, 95):.3f}  max {w.max():.3f}"
+    )
+    fmt = " / ".join
+    print(
+        "  RMS errors: attitude "
+        + fmt(f"{x:.2f}" for x in s["attitude"]["rms"])
+        + " deg, position "
+        + fmt(f"{x:.2f}" for x in s["position"]["rms"])
+        + " m, velocity "
+        + fmt(f"{x:.3f}" for x in s["velocity"]["rms"])
+        + " m/s"
+    )
+    lo, hi = nees_band(len(full))
+    lo6, hi6 = nees_band(len(rates), dof=6)
+    print(f"  mean NEES, 12-dim state: {full.mean():.1f} (95 % band {lo:.1f}-{hi:.1f})")
+    print(f"  mean NEES, rates (6-dim): {rates.mean():.2f} (95 % band {lo6:.2f}-{hi6:.2f})")
+
+
+def report_monte_carlo(name: str, results: list) -> None:
+    from relnav.navigation.state import nees_band
+
+    n = len(results)
+    k0 = round(0.3 * len(results[0]))
+    B = np.stack([block_nees(r, k0) for r in results])  # (n, K, 5)
+    w = np.concatenate(
+        [np.degrees(np.linalg.norm(r.errors()["omega"][k0:], axis=1)) for r in results]
+    )
+    per_step = np.nanmean(B[:, :, 4], axis=0)  # averaged over the runs
+    lo, hi = nees_band(n)  # band of the average of n runs at one step (12 dof)
+    inside = float(np.mean((per_step >= lo) & (per_step <= hi)))
+    pooled = np.nanmean(B, axis=(0, 1))
+    print(f"{name}: {n} noise seeds, steps {k0}-{len(results[0]) - 1}")
+    print(
+        f"  angular-rate error deg/s (all runs): median {np.median(w):.3f}  p95 "
+        f"{np.percentile(w, 95):.3f}  max {w.max():.3f}"
+    )
+    print(
+        f"  12-dim NEES averaged over the runs: median over steps {np.median(per_step):.1f}, "
+        f"{inside:.0%} of steps inside the 95 % band {lo:.1f}-{hi:.1f}"
+    )
+    print(
+        "  pooled mean NEES per 3-dim block (3 = consistent): "
+        + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, pooled[:4], strict=True))
+        + f"; 12-dim {pooled[4]:.1f}"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    from nav_suite import simulate_suite
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
+    p.add_argument("--seeds", type=int, default=1, help="Monte Carlo runs per sequence")
     a = p.parse_args(argv)
-    folders = simulate_suite(a.out, TUMBLING)
-    for name, folder in folders.items():
-        seq = ScanSequence(folder)
-        run = run_sequence(seq, "relnav")
-        res = relative_state(run, gt_poses=seq.gt_poses)
-        k0 = round(0.3 * len(res))
-        w = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
-        s = res.summary(skip=0.3)
-        full = res.nees()[k0:]
-        full = full[np.isfinite(full)]
-        rates = rate_nees(res, k0)
-        rate_true = np.degrees(np.median(np.linalg.norm(res.truth.omega, axis=1)))
-        print(f"{name}: true rate {rate_true:.2f} deg/s; after {k0} of {len(res)} frames:")
-        print(
-            f"  angular-rate error deg/s: median {np.median(w):.3f}  p95 "
-            f"{np.percentile(w, 95):.3f}  max {w.max():.3f}"
-        )
-        fmt = " / ".join
-        print(
-            "  RMS errors: attitude "
-            + fmt(f"{x:.2f}" for x in s["attitude"]["rms"])
-            + " deg, position "
-            + fmt(f"{x:.2f}" for x in s["position"]["rms"])
-            + " m, velocity "
-            + fmt(f"{x:.3f}" for x in s["velocity"]["rms"])
-            + " m/s"
-        )
-        lo, hi = nees_band(len(full))
-        lo6, hi6 = nees_band(len(rates), dof=6)
-        print(f"  mean NEES, 12-dim state: {full.mean():.1f} (95 % band {lo:.1f}-{hi:.1f})")
-        print(f"  mean NEES, rates (6-dim): {rates.mean():.2f} (95 % band {lo6:.2f}-{hi6:.2f})")
+    if a.seeds <= 1:
+        for name, folder in simulate_suite(a.out, TUMBLING).items():
+            report_single(name, track(folder))
+        return 0
+    for name in TUMBLING:
+        report_monte_carlo(name, [track(f) for f in simulate_seeds(a.out, name, a.seeds)])
     return 0
 
 

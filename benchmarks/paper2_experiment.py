@@ -64,6 +64,11 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], bool]] = {
     "ukf+offset (fixed R 1 cm / 1°)": ("ukf", {"centre_offset": True}, False),
     "ukf+offset+jackknife": ("ukf", {"centre_offset": True}, True),
     MAIN: ("ukf", {"centre_offset": True, "observer_bias": True}, True),
+    "ukf+offset+body bias+jackknife": (
+        "ukf",
+        {"centre_offset": True, "observer_bias": True, "bias_frame": "body"},
+        True,
+    ),
     "ukf+offset+bias+jackknife+innovation": (
         "ukf",
         {"centre_offset": True, "observer_bias": True, "noise_scale": "innovation"},

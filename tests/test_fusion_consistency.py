@@ -67,9 +67,18 @@ def test_centre_offset_estimate_and_axis_constraint() -> None:
         TwistorUKF(centre_offset=True, axis_sigma=0.0)
 
 
-def _drifting_observations(seed: int, n: int = 16, white: float = 0.002, walk: float = 0.004):
-    """Observations whose errors are a random walk (``walk`` per step, m and rad/10) plus white
-    noise, each carrying its white covariance and the walk's growth."""
+def _drifting_observations(
+    seed: int,
+    n: int = 16,
+    white: float = 0.002,
+    walk: float = 0.004,
+    body: bool = False,
+    jump: float = 0.0,
+):
+    """Observations whose errors are a random walk (``walk`` per step, m and rad/10; ``jump``
+    instead at the first step, when > 0) plus white noise, each carrying its white covariance
+    and the walk's growth; ``body``: the position walk is fixed to the target (seen in the
+    sensor frame through the target's attitude)."""
     rng = np.random.default_rng(seed)
     t, clean, truth = simulate_observations(n, 4.5, sigma_position=0.0, sigma_attitude_deg=0.0,
                                             seed=seed)  # fmt: skip
@@ -77,16 +86,20 @@ def _drifting_observations(seed: int, n: int = 16, white: float = 0.002, walk: f
 
     sig = np.array([white] * 3 + [white / 10] * 3)
     Qw = np.diag(np.array([walk] * 3 + [walk / 10] * 3) ** 2)
+    Qj = np.diag(np.array([jump] * 3 + [jump / 10] * 3) ** 2) if jump > 0 else Qw
     bias = np.zeros(6)
     obs = []
     for k in range(n):
+        Qk = Qj if k == 1 else Qw
         if k > 0:
-            bias = bias + rng.normal(size=6) * np.sqrt(np.diag(Qw))
+            bias = bias + rng.normal(size=6) * np.sqrt(np.diag(Qk))
         e = bias + rng.normal(size=6) * sig
+        if body:
+            e[:3] = Rotation.from_quat(clean[k].quat_xyzw).apply(bias[:3]) + e[:3] - bias[:3]
         q = (Rotation.from_quat(clean[k].quat_xyzw) * Rotation.from_rotvec(e[3:])).as_quat()
         obs.append(
             Observation(clean[k].position + e[:3], q, R=np.diag(sig**2),
-                        drift=None if k == 0 else Qw)
+                        drift=None if k == 0 else Qk)
         )  # fmt: skip
     return t, obs, truth
 
@@ -114,6 +127,26 @@ def test_observer_bias_state_makes_a_drifting_observer_consistent() -> None:
     assert lo20 <= with_bias <= hi20, (with_bias, lo, hi)
     lo6, hi6 = _band(6, 20)
     assert lo6 <= float(np.mean(nis)) <= hi6
+
+
+def test_body_fixed_observer_bias_needs_the_body_frame_state() -> None:
+    """An offset fixed to the spinning target (as the navigator's map error made in its first
+    frames is: 5 cm, then 2 mm per step) turns in the sensor frame: the bias state in body axes
+    stays consistent, the sensor-axes one does not follow it."""
+    nees: dict[str, list[np.ndarray]] = {"sensor": [], "body": []}
+    for seed in range(20):
+        t, obs, truth = _drifting_observations(seed, walk=0.002, body=True, jump=0.05)
+        for frame in nees:
+            res = Tracker(
+                "ukf", omega0=OMEGA0, q=RIGID_Q, observer_bias=True, bias_frame=frame
+            ).run(t, obs, truth=truth)
+            nees[frame].append(res.nees()[3:])
+    mean = {k: float(np.mean(v)) for k, v in nees.items()}
+    lo20, hi20 = _band(12, 20)
+    assert lo20 <= mean["body"] <= hi20, mean
+    assert mean["sensor"] > hi20, mean
+    with pytest.raises(ConfigError):
+        TwistorUKF(observer_bias=True, bias_frame="lvlh")  # type: ignore[arg-type]
 
 
 def test_add_observer_drift_validates_and_is_a_noop_without_the_state() -> None:

@@ -161,6 +161,13 @@ class TwistorUKF(PoseFilter):
         by :meth:`add_observer_drift` — for the contour model, the covariance of each frame
         merged into the model, which the next registrations inherit. Without it a drifting
         observer's errors are treated as independent from frame to frame.
+    bias_frame : {"sensor", "body"}
+        Axes of the position bias ``β_p`` **[interpretation]**. ``"sensor"`` (default): the
+        measured point is ``d + R c + β_p``. ``"body"``: ``d + R (c + β_p)`` — a bias fixed to
+        the target, as the contour model's is (a frame merged with a registration error shifts
+        the model in its own axes; a quarter turn later that shift is seen along another
+        sensor axis). The drift's position block (given in sensor axes) is rotated into body
+        axes with the current attitude estimate.
 
     Examples
     --------
@@ -198,9 +205,13 @@ class TwistorUKF(PoseFilter):
         centre_offset: bool = False,
         axis_sigma: float = 1e-3,
         observer_bias: bool = False,
+        bias_frame: Literal["sensor", "body"] = "sensor",
     ) -> None:
         self.centre_offset = bool(centre_offset)
         self.observer_bias = bool(observer_bias)
+        if bias_frame not in ("sensor", "body"):
+            raise ConfigError(f"bias_frame must be 'sensor' or 'body', got {bias_frame!r}")
+        self.bias_frame = bias_frame
         self._ib = 18 if self.centre_offset else 15
         self.dim = self._ib + (6 if self.observer_bias else 0)
         self._b = np.zeros(6)
@@ -277,6 +288,10 @@ class TwistorUKF(PoseFilter):
         Q = np.asarray(Q, dtype=np.float64)
         if Q.shape != (6, 6) or not np.all(np.isfinite(Q)):
             raise InputError(f"observer drift must be a finite (6, 6) matrix, got {Q.shape}")
+        if self.bias_frame == "body":
+            J = np.eye(6)
+            J[0:3, 0:3] = quat_to_matrix(self._q).T
+            Q = J @ Q @ J.T
         ib = self._ib
         self._P[ib : ib + 6, ib : ib + 6] += _sym(Q)
         self._prop = None
@@ -424,7 +439,10 @@ class TwistorUKF(PoseFilter):
             if self.observer_bias:
                 ib = self._ib
                 b = self._b + dX[:, ib : ib + 6]
-                d_i = d_i + b[:, 0:3]
+                if self.bias_frame == "body":
+                    d_i = d_i + np.einsum("nij,nj->ni", quat_to_matrix(q_i), b[:, 0:3])
+                else:
+                    d_i = d_i + b[:, 0:3]
                 q_i = _canon_q(_qmul(q_i, quat_delta(b[:, 3:6], 1.0)))
         Z = self._meas_of(d_i, q_i)
         z_hat = self.Wm @ Z
@@ -493,5 +511,6 @@ class TwistorUKF(PoseFilter):
             covariance_update=self.covariance_update,
             centre_offset=self.centre_offset,
             observer_bias=self.observer_bias,
+            bias_frame=self.bias_frame,
         )
         return out
