@@ -170,14 +170,17 @@ def _pack(res: TrackResult) -> dict[str, np.ndarray]:
     return out
 
 
-def observe_seed(seed: int, seq: Path) -> dict[str, np.ndarray]:
-    """Run the main variant through the whole chain and record its observations.
+def observe_seed(
+    seed: int, seq: Path, model_options: dict[str, Any] | None = None
+) -> dict[str, np.ndarray]:
+    """Run the main variant through the whole chain and record its observations
+    (``model_options``: passed to the contour model, :class:`relnav.fusion.ContourModel`).
 
     Returns arrays ``time (K,)``, ``obs (K, 7)`` (NaN = none), ``R (K, 6, 6)`` (NaN = none),
     ``quality (K,)`` and the truth ``T_s_target (K, 4, 4)``.
     """
     fname, opts, _ = VARIANTS[MAIN]
-    rec = _Recorder(ContourObserver(lidar="lidar", seed=seed))
+    rec = _Recorder(ContourObserver(lidar="lidar", seed=seed, model_options=model_options))
     main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=OMEGA0, **opts)
     K = len(main.time)
     obs = np.full((K, 7), np.nan)
@@ -535,7 +538,16 @@ def main() -> None:
         help="dotted scenario override KEY=VALUE (repeatable), e.g. "
         "sensors.0.overrides.sigma_coeff=0 for a noiseless Kinect",
     )
+    ap.add_argument(
+        "--model-option",
+        action="append",
+        default=[],
+        help="contour-model option KEY=VALUE (repeatable, YAML value), e.g. facing=true",
+    )
     args = ap.parse_args()
+    import yaml
+
+    model_options = {k: yaml.safe_load(v) for k, v in (o.split("=", 1) for o in args.model_option)}
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = None
     if args.work is None:
@@ -549,7 +561,11 @@ def main() -> None:
     recs = []
     for seed in range(args.seeds):
         tag = "_".join(p.replace("=", "-") for p in sorted(args.sim_param))
-        cache = work / f"obs{seed:03d}_{args.frames}f_{args.distance:g}m{tag and '_' + tag}.npz"
+        mtag = "_".join(o.replace("=", "-") for o in sorted(args.model_option))
+        cache = work / (
+            f"obs{seed:03d}_{args.frames}f_{args.distance:g}m{tag and '_' + tag}"
+            f"{mtag and '_model-' + mtag}.npz"
+        )
         ts = time.perf_counter()
         if cache.is_file():
             rec = dict(np.load(cache))
@@ -558,7 +574,7 @@ def main() -> None:
             seq = simulate_seed(
                 seed, work / f"seq{seed:03d}{tag and '_' + tag}", args.frames, args.distance, extra
             )
-            rec = observe_seed(seed, seq)
+            rec = observe_seed(seed, seq, model_options)
             rec["seconds"] = np.array(time.perf_counter() - ts)
             np.savez(cache, **rec)
         r = run_variants(rec)
