@@ -1,0 +1,688 @@
+"""Revisits and pose-graph optimisation for relnav's navigator (option ``loop_closure``).
+
+Repeated orbits come back to surfaces already seen. The navigator keeps **keyframes** (every
+``keyframe_every`` accepted frames): the keyframe's pose ``T_target_sensor`` and a small submap,
+the scans of its last ``keyframe_window`` accepted frames expressed in the keyframe's sensor frame
+with the online relative poses (locally accurate). When a new keyframe's estimated pose is close to
+an old keyframe's (position and viewing direction; at least ``loop_min_separation`` keyframes
+older), the new submap is registered onto the old one with the navigator's own robust GICP
+(:func:`~relnav.navigation.gicp.solve_scan_to_map`, the old submap as a small
+:class:`~relnav.navigation.voxel_map.VoxelMap`), from the relative pose the trajectory predicts.
+The **loop edge** is kept only with evidence: overlap, robust residual, a non-degenerate
+information, and a correction consistent (χ²) with the odometry's covariance accumulated between
+the two keyframes.
+
+At the end of the run (:meth:`LoopCloser.correct`) the keyframes form an SE(3) **pose graph**:
+odometry edges between consecutive keyframes (their relative pose in the final trajectory, their
+covariance the composed per-step covariances of the navigator's filter) and the loop edges
+(Geman–McClure kernel, graduated from wide to tight). The optimised keyframes' corrections are
+interpolated on SE(3) over the frames between them.
+
+Conventions: an edge ``(i, j, Z, Ω)`` measures ``Z ≈ X_i⁻¹ X_j`` with a right perturbation,
+``X_i⁻¹ X_j = Z exp(ε)``, ``ε ~ N(0, Ω⁻¹)``, twists ``[ρ (m), φ (rad)]``; the residual is
+``r = log(Z⁻¹ X_i⁻¹ X_j)``. The optimiser is Gauss–Newton on right perturbations
+``X ← X exp(δ)`` with per-edge robust weights (iteratively reweighted), sparse normal equations
+(:mod:`scipy.sparse`); the first node is fixed (it carries the trajectory's gauge).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from relnav.geometry.rotations import hat
+from relnav.geometry.se3 import adjoint, invert
+from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.lie import exp_se3, log_se3
+from relnav.navigation.voxel_map import VoxelMap
+
+__all__ = [
+    "LoopCloser",
+    "LoopEdge",
+    "PoseGraph",
+    "PoseGraphResult",
+    "compose_step_covariances",
+    "interpolate_corrections",
+]
+
+log = logging.getLogger(__name__)
+
+
+def _ad(xi: np.ndarray) -> np.ndarray:
+    """The small adjoint ``ad(ξ)`` (6×6) of a twist ``[ρ, φ]``: ``[[φ×, ρ×], [0, φ×]]``."""
+    A = np.zeros((6, 6))
+    P = hat(xi[3:])
+    A[:3, :3] = P
+    A[:3, 3:] = hat(xi[:3])
+    A[3:, 3:] = P
+    return A
+
+
+def compose_step_covariances(steps: list[np.ndarray], covs: list[np.ndarray]) -> np.ndarray:
+    """Covariance (6×6, right perturbation) of the product ``S₁ S₂ … Sₙ`` of independent steps.
+
+    Parameters
+    ----------
+    steps : list of (4, 4) float64
+        The steps ``S_k`` in order.
+    covs : list of (6, 6) float64
+        Their covariances (right perturbation, body frame of the step's end).
+
+    Returns
+    -------
+    (6, 6) float64
+        ``C`` of ``Z = S₁ … Sₙ``: ``Z S exp(e) ⇒ C ← Ad(S⁻¹) C Ad(S⁻¹)ᵀ + C_S`` step by step.
+    """
+    C = np.zeros((6, 6))
+    for S, Cs in zip(steps, covs, strict=True):
+        A = adjoint(invert(S))
+        C = A @ C @ A.T + Cs
+    return 0.5 * (C + C.T)
+
+
+@dataclass
+class PoseGraphResult:
+    """Outcome of :meth:`PoseGraph.optimize`.
+
+    Attributes
+    ----------
+    poses : (N, 4, 4) float64
+        Optimised node poses.
+    weights : (E,) float64
+        Final robust weight of each edge (1 for non-robust edges).
+    chi2 : (E,) float64
+        Final ``rᵀ Ω r`` of each edge.
+    iterations : int
+        Gauss–Newton iterations run.
+    time_s : float
+        Wall-clock time of the optimisation, s.
+    """
+
+    poses: np.ndarray
+    weights: np.ndarray
+    chi2: np.ndarray
+    iterations: int
+    time_s: float
+
+
+@dataclass
+class _Edge:
+    i: int
+    j: int
+    Z: np.ndarray
+    info: np.ndarray
+    robust: bool
+
+
+class PoseGraph:
+    """SE(3) pose graph: nodes ``X_i`` (``T_target_sensor``), relative-pose edges, robust loops.
+
+    Examples
+    --------
+    >>> g = PoseGraph()
+    >>> a, b = g.add_node(np.eye(4)), g.add_node(np.eye(4))
+    >>> g.add_edge(a, b, np.eye(4), np.eye(6))
+    >>> g.optimize().poses.shape
+    (2, 4, 4)
+    """
+
+    def __init__(self) -> None:
+        self.nodes: list[np.ndarray] = []
+        self.edges: list[_Edge] = []
+
+    def add_node(self, pose: np.ndarray) -> int:
+        """Add a node at its initial pose (4×4); returns its index."""
+        self.nodes.append(np.array(pose, dtype=np.float64))
+        return len(self.nodes) - 1
+
+    def add_edge(
+        self, i: int, j: int, Z: np.ndarray, information: np.ndarray, *, robust: bool = False
+    ) -> None:
+        """Add the measurement ``Z ≈ X_i⁻¹ X_j`` with its information (6×6, right perturbation,
+        ``[ρ, φ]``, 1/m² and 1/rad²); ``robust`` edges get the Geman–McClure kernel."""
+        if not (0 <= i < len(self.nodes) and 0 <= j < len(self.nodes)) or i == j:
+            raise ValueError(f"edge ({i}, {j}) between unknown or equal nodes")
+        L = np.asarray(information, dtype=np.float64)
+        if L.shape != (6, 6) or not np.all(np.isfinite(L)):
+            raise ValueError("an edge's information must be a finite 6×6 matrix")
+        self.edges.append(_Edge(i, j, np.array(Z, dtype=np.float64), 0.5 * (L + L.T), robust))
+
+    def _residuals(self, X: list[np.ndarray]) -> list[np.ndarray]:
+        return [log_se3(invert(e.Z) @ invert(X[e.i]) @ X[e.j]) for e in self.edges]
+
+    def optimize(
+        self,
+        *,
+        fixed: tuple[int, ...] = (0,),
+        kernel: float = 5.0,
+        kernel_start: float = 100.0,
+        kernel_decay: float = 0.6,
+        max_iter: int = 30,
+        tolerance: float = 1e-4,
+    ) -> PoseGraphResult:
+        """Gauss–Newton with iteratively reweighted robust edges.
+
+        Parameters
+        ----------
+        fixed : tuple of int
+            Nodes held at their initial pose (the gauge).
+        kernel : float
+            Geman–McClure scale ``c`` on the Mahalanobis distance ``√χ²`` of a robust edge:
+            weight ``(c² / (c² + χ²))²``.
+        kernel_start, kernel_decay : float
+            Graduated non-convexity: the scale starts at ``kernel_start`` and is multiplied by
+            ``kernel_decay`` per iteration down to ``kernel`` (a loop edge far from a drifted
+            initial guess is not rejected before the graph has moved toward it).
+        max_iter : int
+            Iterations at most.
+        tolerance : float
+            Stop (once the kernel is at ``kernel``) when the largest update is below this
+            (m and rad).
+
+        Returns
+        -------
+        PoseGraphResult
+        """
+        t0 = time.perf_counter()
+        n = len(self.nodes)
+        X = [T.copy() for T in self.nodes]
+        free = np.array([k not in set(fixed) for k in range(n)])
+        col = -np.ones(n, dtype=np.int64)
+        col[free] = np.arange(int(free.sum()))
+        m = 6 * int(free.sum())
+        c = max(float(kernel_start), float(kernel))
+        it = 0
+        weights = np.ones(len(self.edges))
+        while it < max_iter:
+            it += 1
+            r_all = self._residuals(X)
+            chi2 = np.array([r @ e.info @ r for r, e in zip(r_all, self.edges, strict=True)])
+            for k, e in enumerate(self.edges):
+                weights[k] = (c * c / (c * c + chi2[k])) ** 2 if e.robust else 1.0
+            if m == 0:
+                break
+            rows: list[np.ndarray] = []
+            cols: list[np.ndarray] = []
+            vals: list[np.ndarray] = []
+            g = np.zeros(m)
+            for k, (e, r) in enumerate(zip(self.edges, r_all, strict=True)):
+                Jinv = np.eye(6) + 0.5 * _ad(r)
+                Jj = Jinv
+                Ji = -Jinv @ adjoint(invert(X[e.j]) @ X[e.i])
+                W = weights[k] * e.info
+                blocks = [(e.i, Ji), (e.j, Jj)]
+                for a, Ja in blocks:
+                    if col[a] < 0:
+                        continue
+                    g[6 * col[a] : 6 * col[a] + 6] += Ja.T @ W @ r
+                    for b, Jb in blocks:
+                        if col[b] < 0:
+                            continue
+                        ra = 6 * col[a] + np.arange(6)
+                        rb = 6 * col[b] + np.arange(6)
+                        rows.append(np.repeat(ra, 6))
+                        cols.append(np.tile(rb, 6))
+                        vals.append((Ja.T @ W @ Jb).ravel())
+            if not vals:
+                break
+            H = sp.csc_matrix(
+                (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
+            )
+            # a tiny diagonal damping keeps nodes without any edge (or a gauge freedom) solvable
+            H = H + sp.identity(m, format="csc") * (1e-9 * max(float(H.diagonal().max()), 1.0))
+            delta = spla.spsolve(H, -g)
+            if not np.all(np.isfinite(delta)):
+                log.warning("pose graph: non-finite update, optimisation stopped")
+                break
+            for k in np.flatnonzero(free):
+                X[k] = X[k] @ exp_se3(delta[6 * col[k] : 6 * col[k] + 6])
+            at_kernel = c <= kernel
+            c = max(c * kernel_decay, kernel)
+            if at_kernel and float(np.max(np.abs(delta))) < tolerance:
+                break
+        r_all = self._residuals(X)
+        chi2 = np.array([r @ e.info @ r for r, e in zip(r_all, self.edges, strict=True)])
+        for k, e in enumerate(self.edges):
+            weights[k] = (c * c / (c * c + chi2[k])) ** 2 if e.robust else 1.0
+        return PoseGraphResult(
+            np.stack(X) if X else np.zeros((0, 4, 4)),
+            weights,
+            chi2,
+            it,
+            time.perf_counter() - t0,
+        )
+
+
+def interpolate_corrections(
+    poses: np.ndarray, key_frames: np.ndarray, key_before: np.ndarray, key_after: np.ndarray
+) -> np.ndarray:
+    """Apply keyframe corrections to a whole trajectory.
+
+    Each keyframe ``i`` (frame ``key_frames[i]``) moved from ``key_before[i]`` to
+    ``key_after[i]``: its left correction is ``D_i = X_after X_before⁻¹`` (target frame). A frame
+    between keyframes ``a`` and ``b`` at fraction ``s`` gets ``exp(s log(D_b D_a⁻¹)) D_a``; frames
+    before the first (after the last) keyframe get its correction.
+
+    Parameters
+    ----------
+    poses : (N, 4, 4) float64
+        Trajectory ``T_target_sensor``.
+    key_frames : (K,) int
+        Frame of each keyframe, increasing.
+    key_before, key_after : (K, 4, 4) float64
+        Keyframe poses before and after the optimisation.
+
+    Returns
+    -------
+    (N, 4, 4) float64
+        Corrected trajectory.
+    """
+    out = np.array(poses, dtype=np.float64, copy=True)
+    if len(key_frames) == 0:
+        return out
+    D = [a @ invert(b) for a, b in zip(key_after, key_before, strict=True)]
+    kf = np.asarray(key_frames, dtype=np.int64)
+    for f in range(len(out)):
+        b = int(np.searchsorted(kf, f, side="left"))
+        if b < len(kf) and kf[b] == f:
+            Df = D[b]
+        elif b == 0:
+            Df = D[0]
+        elif b == len(kf):
+            Df = D[-1]
+        else:
+            a = b - 1
+            s = (f - kf[a]) / (kf[b] - kf[a])
+            Df = exp_se3(s * log_se3(D[b] @ invert(D[a]))) @ D[a]
+        out[f] = Df @ out[f]
+    return out
+
+
+@dataclass
+class LoopEdge:
+    """An accepted (or examined) revisit: keyframe ``new`` registered onto keyframe ``old``.
+
+    Attributes
+    ----------
+    old, new : int
+        Keyframe indices.
+    Z : (4, 4) float64
+        Measured ``T_old_new`` (the new keyframe's sensor frame in the old one's).
+    information : (6, 6) float64
+        Its information, right perturbation of ``Z``.
+    overlap, rms, chi2, degeneracy : float
+        Evidence: fraction of points with a map point within the gate, robust residual (σ
+        units), χ² of the correction against the odometry's covariance between the keyframes,
+        eigenvalue ratio of the lever-arm-normalised information.
+    accepted : bool
+        Whether the edge passed every test.
+    """
+
+    old: int
+    new: int
+    Z: np.ndarray
+    information: np.ndarray
+    overlap: float
+    rms: float
+    chi2: float
+    degeneracy: float
+    accepted: bool
+
+
+@dataclass
+class _Keyframe:
+    frame: int
+    pose: np.ndarray
+    points: np.ndarray
+    centroid: np.ndarray
+
+
+class LoopCloser:
+    """Keyframes, revisits and the pose-graph correction of a trajectory (see the module doc).
+
+    The navigator feeds every frame to :meth:`observe` (its scan and its step's covariance);
+    :meth:`correct` does the rest on the final trajectory, where the relative poses that build
+    the submaps are the smoothed ones.
+
+    Parameters
+    ----------
+    voxel_size : float
+        Voxel edge of the submaps' voxel maps (the navigator's map voxel), m.
+    map_options : dict
+        Other :class:`~relnav.navigation.voxel_map.VoxelMap` options (``noise_floor``,
+        ``inplane_sigma``, ``k_neighbors``, ``max_weight``), m.
+    every : int
+        Accepted frames between keyframes.
+    window : int
+        A keyframe's submap merges the accepted frames within ``window`` frames of it (both
+        sides), in its sensor frame.
+    max_points : int
+        Point budget of a submap (an evenly spaced subset beyond it).
+    min_separation : int
+        Keyframes between a revisit and the old keyframe it may close on, at least.
+    max_distance : float
+        Largest distance between the two sensor positions, as a fraction of the range to the
+        submap's centroid.
+    max_angle_deg : float
+        Largest angle between the two viewing directions (sensor → submap centroid), degrees.
+    min_overlap : float
+        Smallest fraction of submap points with a map point within the gate.
+    max_rms : float
+        Largest robust residual of the registration (σ units of the map's noise model).
+    chi2_gate : float
+        Largest χ² (6 dof) of the loop correction against the odometry's covariance between
+        the keyframes plus the registration's own.
+    min_degeneracy : float
+        Smallest eigenvalue ratio of the registration's lever-arm-normalised information.
+    info_scale : float
+        Factor on the registration's information of a loop edge (< 1: the edge is trusted
+        less than the registration claims; see :class:`~relnav.navigation.NavigatorConfig`).
+    kernel, kernel_start, kernel_decay, max_iter, tolerance : float
+        Registration's Geman–McClure kernel and stopping rule (the navigator's).
+    graph_kernel : float
+        Geman–McClure scale of the loop edges in the pose graph (Mahalanobis units).
+    fallback_sigma : tuple of float
+        1σ (m, rad) of a step without a filter covariance (skipped frames).
+    """
+
+    def __init__(
+        self,
+        voxel_size: float,
+        map_options: dict[str, Any],
+        *,
+        every: int = 5,
+        window: int = 5,
+        max_points: int = 3000,
+        min_separation: int = 10,
+        max_distance: float = 0.15,
+        max_angle_deg: float = 15.0,
+        min_overlap: float = 0.5,
+        max_rms: float = 3.0,
+        chi2_gate: float = 50.0,
+        min_degeneracy: float = 1e-6,
+        info_scale: float = 1.0,
+        kernel: float = 3.0,
+        kernel_start: float = 100.0,
+        kernel_decay: float = 0.6,
+        max_iter: int = 30,
+        tolerance: float = 1e-4,
+        graph_kernel: float = 5.0,
+        fallback_sigma: tuple[float, float] = (1.0, 0.1),
+    ) -> None:
+        self.voxel_size = float(voxel_size)
+        self.map_options = dict(map_options)
+        self.every = max(1, int(every))
+        self.window = max(0, int(window))
+        self.max_points = int(max_points)
+        self.min_separation = max(1, int(min_separation))
+        self.max_distance = float(max_distance)
+        self.max_angle = math.radians(float(max_angle_deg))
+        self.min_overlap = float(min_overlap)
+        self.max_rms = float(max_rms)
+        self.chi2_gate = float(chi2_gate)
+        self.min_degeneracy = float(min_degeneracy)
+        self.info_scale = float(info_scale)
+        self.kernel = float(kernel)
+        self.kernel_start = float(kernel_start)
+        self.kernel_decay = float(kernel_decay)
+        self.max_iter = int(max_iter)
+        self.tolerance = float(tolerance)
+        self.graph_kernel = float(graph_kernel)
+        st, sr = fallback_sigma
+        self._fallback = np.diag([st**2] * 3 + [sr**2] * 3)
+        self._points: dict[int, np.ndarray] = {}
+        self._step_cov: dict[int, np.ndarray] = {}
+        self.keyframes: list[_Keyframe] = []
+        self.loops: list[LoopEdge] = []
+        self.time_observe_s = 0.0
+        self.time_correct_s = 0.0
+        self.last_result: PoseGraphResult | None = None
+
+    def observe(
+        self,
+        frame: int,
+        status: str,
+        points: np.ndarray | None,
+        step_covariance: np.ndarray | None,
+    ) -> None:
+        """Record one frame: its status, scan points (sensor frame, m; kept for accepted
+        frames) and the covariance of its step (6×6, right perturbation; None: unknown)."""
+        t0 = time.perf_counter()
+        if step_covariance is not None and np.all(np.isfinite(step_covariance)):
+            self._step_cov[frame] = np.array(step_covariance, dtype=np.float64)
+        if status in ("ok", "first") and points is not None and len(points) >= 3:
+            self._points[frame] = np.array(points, dtype=np.float64)
+        self.time_observe_s += time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ keyframes and loops
+    def _make_keyframes(self, poses: np.ndarray) -> None:
+        frames = sorted(f for f in self._points if f < len(poses))
+        self.keyframes = []
+        for n, f in enumerate(frames):
+            if n % self.every:
+                continue
+            T = poses[f]
+            Ti = invert(T)
+            parts = []
+            for g in frames[max(0, n - self.window) : n + self.window + 1]:
+                if abs(g - f) > self.window:
+                    continue
+                M = Ti @ poses[g]
+                parts.append(self._points[g] @ M[:3, :3].T + M[:3, 3])
+            Q = np.concatenate(parts)
+            if len(Q) > self.max_points:
+                Q = Q[np.linspace(0, len(Q) - 1, self.max_points).astype(np.int64)]
+            centroid = T[:3, :3] @ Q.mean(0) + T[:3, 3]
+            self.keyframes.append(_Keyframe(f, T.copy(), Q, centroid))
+
+    def _chain_covariance(self, poses: np.ndarray, f0: int, f1: int) -> np.ndarray:
+        """Covariance of the relative pose from frame ``f0`` to ``f1`` (composed steps)."""
+        steps = [invert(poses[f - 1]) @ poses[f] for f in range(f0 + 1, f1 + 1)]
+        covs = [self._step_cov.get(f, self._fallback) for f in range(f0 + 1, f1 + 1)]
+        return compose_step_covariances(steps, covs)
+
+    def _candidate(self, k: int) -> int | None:
+        """The old keyframe nearest to keyframe ``k`` that passes the revisit tests."""
+        new = self.keyframes[k]
+        p_new = new.pose[:3, 3]
+        v_new = new.centroid - p_new
+        rng = float(np.linalg.norm(v_new))
+        if rng <= 0:
+            return None
+        best, best_d = None, math.inf
+        for j in range(k - self.min_separation + 1):
+            old = self.keyframes[j]
+            d = float(np.linalg.norm(old.pose[:3, 3] - p_new))
+            if d > self.max_distance * rng or d >= best_d:
+                continue
+            v_old = old.centroid - old.pose[:3, 3]
+            c = float(v_old @ v_new) / max(float(np.linalg.norm(v_old)) * rng, 1e-12)
+            if math.acos(min(1.0, max(-1.0, c))) > self.max_angle:
+                continue
+            best, best_d = j, d
+        return best
+
+    def _loop(self, poses: np.ndarray, j: int, k: int, maps: dict[int, VoxelMap]) -> LoopEdge:
+        old, new = self.keyframes[j], self.keyframes[k]
+        if j not in maps:
+            maps[j] = VoxelMap(self.voxel_size, **self.map_options)
+            maps[j].insert(old.points, old.frame)
+        Z0 = invert(old.pose) @ new.pose
+        C_chain = self._chain_covariance(poses, old.frame, new.frame)
+        fit = register_submap(
+            new.points,
+            maps[j],
+            Z0,
+            C_chain,
+            kernel=self.kernel,
+            kernel_start=self.kernel_start,
+            kernel_decay=self.kernel_decay,
+            max_iter=self.max_iter,
+            tolerance=self.tolerance,
+        )
+        # the registration's information (left, old frame) → right perturbation of Z
+        A = adjoint(fit["T"])
+        info = self.info_scale * (A.T @ fit["H"] @ A)
+        info = 0.5 * (info + info.T)
+        try:
+            xi = log_se3(invert(Z0) @ fit["T"])
+            chi2 = float(xi @ np.linalg.solve(C_chain + np.linalg.pinv(info), xi))
+        except np.linalg.LinAlgError:
+            chi2 = math.inf
+        accepted = bool(
+            np.all(np.isfinite(fit["T"]))
+            and fit["overlap"] >= self.min_overlap
+            and fit["rms"] <= self.max_rms
+            and fit["cond"] >= self.min_degeneracy
+            and chi2 <= self.chi2_gate
+        )
+        log.debug(
+            "loop frame %d → %d: overlap %.2f rms %.2f χ² %.1f %s",
+            new.frame,
+            old.frame,
+            fit["overlap"],
+            fit["rms"],
+            chi2,
+            "accepted" if accepted else "rejected",
+        )
+        return LoopEdge(
+            j, k, fit["T"], info, fit["overlap"], fit["rms"], chi2, fit["cond"], accepted
+        )
+
+    # ------------------------------------------------------------------ offline correction
+    def correct(self, poses: np.ndarray, first_frame: int = 0) -> np.ndarray:
+        """The trajectory ``poses`` (N, 4, 4) corrected by the pose graph of the keyframes.
+
+        Keyframes and their submaps are built from ``poses``; each keyframe is registered onto
+        its revisited old keyframe (if any). Odometry edges are the relative poses of
+        consecutive keyframes in ``poses`` with the composed step covariances; loop edges are
+        the accepted revisits. Without an accepted loop edge the trajectory is unchanged.
+        Frames before ``first_frame`` (before the map started) are never changed.
+        """
+        t0 = time.perf_counter()
+        poses = np.asarray(poses, dtype=np.float64)
+        self._make_keyframes(poses)
+        kfs = self.keyframes
+        self.loops = []
+        maps: dict[int, VoxelMap] = {}
+        for k in range(len(kfs)):
+            j = self._candidate(k)
+            if j is not None:
+                self.loops.append(self._loop(poses, j, k, maps))
+        loops = [e for e in self.loops if e.accepted]
+        if len(kfs) < 2 or not loops:
+            self.time_correct_s = time.perf_counter() - t0
+            return poses.copy()
+        g = PoseGraph()
+        for kf in kfs:
+            g.add_node(poses[kf.frame])
+        for a in range(len(kfs) - 1):
+            fa, fb = kfs[a].frame, kfs[a + 1].frame
+            C = self._chain_covariance(poses, fa, fb)
+            g.add_edge(a, a + 1, invert(poses[fa]) @ poses[fb], _information(C))
+        for e in loops:
+            g.add_edge(e.old, e.new, e.Z, e.information, robust=True)
+        res = g.optimize(kernel=self.graph_kernel)
+        self.last_result = res
+        frames = np.array([kf.frame for kf in kfs])
+        out = interpolate_corrections(poses, frames, np.stack(g.nodes), res.poses)
+        out[:first_frame] = poses[:first_frame]
+        self.time_correct_s = time.perf_counter() - t0
+        log.info(
+            "pose graph: %d keyframes, %d of %d loop edges accepted, %d iterations, "
+            "%.1f ms (optimisation %.1f ms)",
+            len(kfs),
+            len(loops),
+            len(self.loops),
+            res.iterations,
+            1e3 * self.time_correct_s,
+            1e3 * res.time_s,
+        )
+        return out
+
+
+def _information(C: np.ndarray) -> np.ndarray:
+    """Information of a covariance (6×6), regularised so that a singular one stays finite."""
+    C = 0.5 * (C + C.T)
+    eps = 1e-12 * max(float(np.trace(C)), 1e-12)
+    L = np.linalg.inv(C + eps * np.eye(6))
+    return 0.5 * (L + L.T)
+
+
+def register_submap(
+    points: np.ndarray,
+    target: VoxelMap,
+    T0: np.ndarray,
+    prior_covariance: np.ndarray,
+    *,
+    kernel: float = 3.0,
+    kernel_start: float = 100.0,
+    kernel_decay: float = 0.6,
+    max_iter: int = 30,
+    tolerance: float = 1e-4,
+) -> dict[str, Any]:
+    """Register a submap (``points``, its own frame, m) onto a keyframe's voxel map from ``T0``.
+
+    The prior inside the least squares is weak (the odometry's covariance between the two
+    keyframes, ``prior_covariance`` body frame of ``T0``, inflated 4× in σ): it only holds the
+    directions the two submaps do not constrain. The correspondence gate is 3σ of that prior at
+    the submap's range plus two voxels.
+
+    Returns
+    -------
+    dict
+        ``T`` (4×4, ``T_old_new``), ``H`` (6×6 information without the prior, left twist in the
+        old keyframe's frame, scaled by the observed residual), ``overlap``, ``rms``, ``cond``.
+    """
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    v = target.voxel_size
+    C = 0.5 * (prior_covariance + prior_covariance.T)
+    rng = float(np.median(np.linalg.norm(P, axis=1))) if len(P) else 1.0
+    s = np.sqrt(np.maximum(np.diag(C), 0.0))
+    gate = float(
+        max(3.0 * (float(np.linalg.norm(s[:3])) + float(np.linalg.norm(s[3:])) * rng), 2.0 * v)
+    )
+    S = 16.0 * C
+    Ad = adjoint(T0)
+    Sl = Ad @ (S + 1e-12 * np.eye(6)) @ Ad.T
+    Lam = np.linalg.pinv(0.5 * (Sl + Sl.T))
+    Lam = 0.5 * (Lam + Lam.T)
+    fit = solve_scan_to_map(
+        P,
+        target.search_trees,
+        target.means,
+        target.information,
+        np.ascontiguousarray(T0),
+        np.ascontiguousarray(T0),
+        np.ascontiguousarray(Lam),
+        gate,
+        float(kernel),
+        int(max_iter),
+        tolerance * v,
+        tolerance * v / max(rng, 1.0),
+        c0=float(kernel_start),
+        decay=float(kernel_decay),
+    )
+    n = max(len(P), 1)
+    has = fit.d2 >= 0
+    rms = float(math.sqrt(fit.swd / fit.sw)) if fit.sw > 0 else math.inf
+    var_factor = max(1.0, rms**2) if np.isfinite(rms) else 1.0
+    radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), v)
+    sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
+    Hs = fit.H * sc[:, None] * sc[None, :]
+    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
+    return {
+        "T": fit.T,
+        "H": fit.H / var_factor,
+        "overlap": float(has.sum()) / n,
+        "rms": rms,
+        "cond": float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0,
+        "n_pairs": int(fit.n_pairs),
+    }
