@@ -170,6 +170,9 @@ class NavigatorConfig:
         Geman–McClure scale of the loop edges in the pose graph (Mahalanobis units).
     loop_info_scale : float
         Factor on a loop registration's information in the pose graph.
+    loop_prior_scale : float
+        Factor on the information of a prior on each keyframe at its tracked pose (the
+        filter's pose covariance; 0 = none).
     """
 
     voxel_factor: float = 0.3
@@ -212,6 +215,7 @@ class NavigatorConfig:
     loop_chi2_gate: float = 50.0
     loop_kernel: float = 5.0
     loop_info_scale: float = 1.0
+    loop_prior_scale: float = 0.0
 
 
 def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
@@ -506,11 +510,13 @@ class Navigator:
                 tolerance=c.tolerance,
                 graph_kernel=c.loop_kernel,
                 info_scale=c.loop_info_scale,
+                prior_scale=c.loop_prior_scale,
                 fallback_sigma=self._first_sigma,
             )
         cov = out.result.info.get("step_covariance") if out.result is not None else None
         Pm = None if P is None else _even_subset(P, c.max_map_points)
-        self.loop_closer.observe(self.n_frames - 1, out.status, Pm, cov)
+        P_pose = self.motion.P[:6, :6] if self.motion is not None else None
+        self.loop_closer.observe(self.n_frames - 1, out.status, Pm, cov, P_pose)
         out.time_s += time.perf_counter() - ts
         return out
 

@@ -37,7 +37,6 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from relnav.geometry.rotations import hat
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
 from relnav.navigation.lie import exp_se3, log_se3
@@ -53,16 +52,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-def _ad(xi: np.ndarray) -> np.ndarray:
-    """The small adjoint ``ad(ξ)`` (6×6) of a twist ``[ρ, φ]``: ``[[φ×, ρ×], [0, φ×]]``."""
-    A = np.zeros((6, 6))
-    P = hat(xi[3:])
-    A[:3, :3] = P
-    A[:3, 3:] = hat(xi[:3])
-    A[3:, 3:] = P
-    return A
 
 
 def compose_step_covariances(steps: list[np.ndarray], covs: list[np.ndarray]) -> np.ndarray:
@@ -154,8 +143,14 @@ class PoseGraph:
             raise ValueError("an edge's information must be a finite 6×6 matrix")
         self.edges.append(_Edge(i, j, np.array(Z, dtype=np.float64), 0.5 * (L + L.T), robust))
 
-    def _residuals(self, X: list[np.ndarray]) -> list[np.ndarray]:
-        return [log_se3(invert(e.Z) @ invert(X[e.i]) @ X[e.j]) for e in self.edges]
+    def add_prior(self, j: int, T: np.ndarray, information: np.ndarray) -> None:
+        """Add the unary measurement ``T ≈ X_j`` (right perturbation, information 6×6)."""
+        if not 0 <= j < len(self.nodes):
+            raise ValueError(f"prior on unknown node {j}")
+        L = np.asarray(information, dtype=np.float64)
+        if L.shape != (6, 6) or not np.all(np.isfinite(L)):
+            raise ValueError("a prior's information must be a finite 6×6 matrix")
+        self.edges.append(_Edge(-1, j, np.array(T, dtype=np.float64), 0.5 * (L + L.T), False))
 
     def optimize(
         self,
@@ -192,72 +187,121 @@ class PoseGraph:
         """
         t0 = time.perf_counter()
         n = len(self.nodes)
-        X = [T.copy() for T in self.nodes]
-        free = np.array([k not in set(fixed) for k in range(n)])
-        col = -np.ones(n, dtype=np.int64)
+        E = len(self.edges)
+        # node 0 of the extended arrays is the fixed origin of unary priors (edge i = -1)
+        X = np.concatenate([np.eye(4)[None], np.stack(self.nodes)]) if n else np.eye(4)[None]
+        ei = np.array([e.i + 1 for e in self.edges], dtype=np.int64)
+        ej = np.array([e.j + 1 for e in self.edges], dtype=np.int64)
+        Zi = np.stack([invert(e.Z) for e in self.edges]) if E else np.zeros((0, 4, 4))
+        Om = np.stack([e.info for e in self.edges]) if E else np.zeros((0, 6, 6))
+        robust = np.array([e.robust for e in self.edges], dtype=bool)
+        fixed_set = {k + 1 for k in fixed} | {0}
+        col = -np.ones(n + 1, dtype=np.int64)
+        free = np.array([k not in fixed_set for k in range(n + 1)])
         col[free] = np.arange(int(free.sum()))
         m = 6 * int(free.sum())
         c = max(float(kernel_start), float(kernel))
         it = 0
-        weights = np.ones(len(self.edges))
-        while it < max_iter:
+        weights = np.ones(E)
+        chi2 = np.zeros(E)
+        blk = np.arange(6)
+        while E and m:
             it += 1
-            r_all = self._residuals(X)
-            chi2 = np.array([r @ e.info @ r for r, e in zip(r_all, self.edges, strict=True)])
-            for k, e in enumerate(self.edges):
-                weights[k] = (c * c / (c * c + chi2[k])) ** 2 if e.robust else 1.0
-            if m == 0:
-                break
-            rows: list[np.ndarray] = []
-            cols: list[np.ndarray] = []
-            vals: list[np.ndarray] = []
+            r, chi2, weights = self._evaluate(X, ei, ej, Zi, Om, robust, c)
+            Jinv = np.eye(6)[None] + 0.5 * _ad_batch(r)
+            Jj = Jinv
+            Ji = -Jinv @ _adjoint_batch(_inv_batch(X[ej]) @ X[ei])
+            W = weights[:, None, None] * Om
             g = np.zeros(m)
-            for k, (e, r) in enumerate(zip(self.edges, r_all, strict=True)):
-                Jinv = np.eye(6) + 0.5 * _ad(r)
-                Jj = Jinv
-                Ji = -Jinv @ adjoint(invert(X[e.j]) @ X[e.i])
-                W = weights[k] * e.info
-                blocks = [(e.i, Ji), (e.j, Jj)]
-                for a, Ja in blocks:
-                    if col[a] < 0:
+            rows, cols, vals = [], [], []
+            for na, Ja in ((ei, Ji), (ej, Jj)):
+                ca = col[na]
+                ok = ca >= 0
+                gv = np.einsum("eji,ejk,ek->ei", Ja[ok], W[ok], r[ok])
+                np.add.at(g, (6 * ca[ok])[:, None] + blk, gv)
+                for nb, Jb in ((ei, Ji), (ej, Jj)):
+                    cb = col[nb]
+                    okb = ok & (cb >= 0)
+                    if not okb.any():
                         continue
-                    g[6 * col[a] : 6 * col[a] + 6] += Ja.T @ W @ r
-                    for b, Jb in blocks:
-                        if col[b] < 0:
-                            continue
-                        ra = 6 * col[a] + np.arange(6)
-                        rb = 6 * col[b] + np.arange(6)
-                        rows.append(np.repeat(ra, 6))
-                        cols.append(np.tile(rb, 6))
-                        vals.append((Ja.T @ W @ Jb).ravel())
-            if not vals:
-                break
+                    Hab = np.einsum("eji,ejk,ekl->eil", Ja[okb], W[okb], Jb[okb])
+                    rr = (6 * ca[okb])[:, None, None] + blk[None, :, None]
+                    cc = (6 * cb[okb])[:, None, None] + blk[None, None, :]
+                    rows.append(np.broadcast_to(rr, Hab.shape).ravel())
+                    cols.append(np.broadcast_to(cc, Hab.shape).ravel())
+                    vals.append(Hab.ravel())
             H = sp.csc_matrix(
                 (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
             )
-            # a tiny diagonal damping keeps nodes without any edge (or a gauge freedom) solvable
-            H = H + sp.identity(m, format="csc") * (1e-9 * max(float(H.diagonal().max()), 1.0))
-            delta = spla.spsolve(H, -g)
+            # a tiny relative damping keeps a node without any edge solvable
+            H = H + sp.diags(1e-9 * H.diagonal() + 1e-12, format="csc")
+            delta = spla.spsolve(H, -g).reshape(-1, 6)
             if not np.all(np.isfinite(delta)):
                 log.warning("pose graph: non-finite update, optimisation stopped")
                 break
             for k in np.flatnonzero(free):
-                X[k] = X[k] @ exp_se3(delta[6 * col[k] : 6 * col[k] + 6])
+                X[k] = X[k] @ exp_se3(delta[col[k]])
             at_kernel = c <= kernel
             c = max(c * kernel_decay, kernel)
-            if at_kernel and float(np.max(np.abs(delta))) < tolerance:
+            if (at_kernel and float(np.max(np.abs(delta))) < tolerance) or it >= max_iter:
                 break
-        r_all = self._residuals(X)
-        chi2 = np.array([r @ e.info @ r for r, e in zip(r_all, self.edges, strict=True)])
-        for k, e in enumerate(self.edges):
-            weights[k] = (c * c / (c * c + chi2[k])) ** 2 if e.robust else 1.0
-        return PoseGraphResult(
-            np.stack(X) if X else np.zeros((0, 4, 4)),
-            weights,
-            chi2,
-            it,
-            time.perf_counter() - t0,
-        )
+        if E:
+            _, chi2, weights = self._evaluate(X, ei, ej, Zi, Om, robust, c)
+        return PoseGraphResult(X[1:].copy(), weights, chi2, it, time.perf_counter() - t0)
+
+    @staticmethod
+    def _evaluate(
+        X: np.ndarray,
+        ei: np.ndarray,
+        ej: np.ndarray,
+        Zi: np.ndarray,
+        Om: np.ndarray,
+        robust: np.ndarray,
+        c: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Residuals ``(E, 6)``, their χ² and the robust weights at kernel scale ``c``."""
+        Ek = Zi @ _inv_batch(X[ei]) @ X[ej]
+        r = np.stack([log_se3(T) for T in Ek])
+        chi2 = np.einsum("ei,eij,ej->e", r, Om, r)
+        w = np.where(robust, (c * c / (c * c + chi2)) ** 2, 1.0)
+        return r, chi2, w
+
+
+def _inv_batch(T: np.ndarray) -> np.ndarray:
+    """Inverses of rigid transforms ``(K, 4, 4)``."""
+    out = np.zeros_like(T)
+    Rt = np.transpose(T[:, :3, :3], (0, 2, 1))
+    out[:, :3, :3] = Rt
+    out[:, :3, 3] = -np.einsum("kij,kj->ki", Rt, T[:, :3, 3])
+    out[:, 3, 3] = 1.0
+    return out
+
+
+def _hat_batch(v: np.ndarray) -> np.ndarray:
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
+
+
+def _adjoint_batch(T: np.ndarray) -> np.ndarray:
+    """Adjoints ``(K, 6, 6)`` of ``(K, 4, 4)`` transforms (see :func:`adjoint`)."""
+    A = np.zeros((len(T), 6, 6))
+    R = T[:, :3, :3]
+    A[:, :3, :3] = R
+    A[:, 3:, 3:] = R
+    A[:, :3, 3:] = _hat_batch(T[:, :3, 3]) @ R
+    return A
+
+
+def _ad_batch(xi: np.ndarray) -> np.ndarray:
+    """Small adjoints ``ad(ξ) = [[φ×, ρ×], [0, φ×]]`` (K, 6, 6) of twists ``[ρ, φ]`` (K, 6)."""
+    A = np.zeros((len(xi), 6, 6))
+    P = _hat_batch(xi[:, 3:])
+    A[:, :3, :3] = P
+    A[:, 3:, 3:] = P
+    A[:, :3, 3:] = _hat_batch(xi[:, :3])
+    return A
 
 
 def interpolate_corrections(
@@ -384,6 +428,12 @@ class LoopCloser:
     info_scale : float
         Factor on the registration's information of a loop edge (< 1: the edge is trusted
         less than the registration claims; see :class:`~relnav.navigation.NavigatorConfig`).
+    prior_scale : float
+        Factor on the information of a unary prior on each keyframe at its tracked pose, with
+        the filter's pose covariance (0 = none). **[interpretation]** The navigator tracks
+        against a map, not only from the previous frame: its error does not grow along the
+        chain as the odometry edges alone would have it, and without priors the graph pulls
+        the later orbits onto the first one.
     kernel, kernel_start, kernel_decay, max_iter, tolerance : float
         Registration's Geman–McClure kernel and stopping rule (the navigator's).
     graph_kernel : float
@@ -408,6 +458,7 @@ class LoopCloser:
         chi2_gate: float = 50.0,
         min_degeneracy: float = 1e-6,
         info_scale: float = 1.0,
+        prior_scale: float = 0.0,
         kernel: float = 3.0,
         kernel_start: float = 100.0,
         kernel_decay: float = 0.6,
@@ -429,6 +480,7 @@ class LoopCloser:
         self.chi2_gate = float(chi2_gate)
         self.min_degeneracy = float(min_degeneracy)
         self.info_scale = float(info_scale)
+        self.prior_scale = float(prior_scale)
         self.kernel = float(kernel)
         self.kernel_start = float(kernel_start)
         self.kernel_decay = float(kernel_decay)
@@ -439,6 +491,7 @@ class LoopCloser:
         self._fallback = np.diag([st**2] * 3 + [sr**2] * 3)
         self._points: dict[int, np.ndarray] = {}
         self._step_cov: dict[int, np.ndarray] = {}
+        self._pose_cov: dict[int, np.ndarray] = {}
         self.keyframes: list[_Keyframe] = []
         self.loops: list[LoopEdge] = []
         self.time_observe_s = 0.0
@@ -451,18 +504,31 @@ class LoopCloser:
         status: str,
         points: np.ndarray | None,
         step_covariance: np.ndarray | None,
+        pose_covariance: np.ndarray | None = None,
     ) -> None:
         """Record one frame: its status, scan points (sensor frame, m; kept for accepted
-        frames) and the covariance of its step (6×6, right perturbation; None: unknown)."""
+        frames), the covariance of its step and of its pose (6×6, right perturbation; None:
+        unknown)."""
         t0 = time.perf_counter()
         if step_covariance is not None and np.all(np.isfinite(step_covariance)):
             self._step_cov[frame] = np.array(step_covariance, dtype=np.float64)
+        if pose_covariance is not None and np.all(np.isfinite(pose_covariance)):
+            self._pose_cov[frame] = np.array(pose_covariance, dtype=np.float64)
         if status in ("ok", "first") and points is not None and len(points) >= 3:
             self._points[frame] = np.array(points, dtype=np.float64)
         self.time_observe_s += time.perf_counter() - t0
 
     # ------------------------------------------------------------------ keyframes and loops
-    def _make_keyframes(self, poses: np.ndarray) -> None:
+    def _make_keyframes(self, poses: np.ndarray, first_frame: int) -> None:
+        """Keyframes every ``every`` accepted frames, each with its submap.
+
+        **[interpretation, measured]** The first keyframe's submap is its own scan only: the
+        frames right after the first carry the first step's error relative to it (the step
+        without a motion prior), and a submap merging them registers onto that error — the
+        revisit of the first frame, the one edge that can remove it, then measures it back
+        (eros-ellipse-64, revisit at frame 100: 0.50 m off with frames 0–5 merged, 0.06 m with
+        frame 0 alone).
+        """
         frames = sorted(f for f in self._points if f < len(poses))
         self.keyframes = []
         for n, f in enumerate(frames):
@@ -471,7 +537,8 @@ class LoopCloser:
             T = poses[f]
             Ti = invert(T)
             parts = []
-            for g in frames[max(0, n - self.window) : n + self.window + 1]:
+            near = [] if f <= first_frame else frames[max(0, n - self.window) : n + self.window + 1]
+            for g in near or [f]:
                 if abs(g - f) > self.window:
                     continue
                 M = Ti @ poses[g]
@@ -509,33 +576,46 @@ class LoopCloser:
             best, best_d = j, d
         return best
 
+    def _submap(self, k: int, maps: dict[int, VoxelMap]) -> VoxelMap:
+        if k not in maps:
+            maps[k] = VoxelMap(self.voxel_size, **self.map_options)
+            maps[k].insert(self.keyframes[k].points, self.keyframes[k].frame)
+        return maps[k]
+
     def _loop(self, poses: np.ndarray, j: int, k: int, maps: dict[int, VoxelMap]) -> LoopEdge:
+        """Register keyframes ``k`` (new) and ``j`` (old): the submap with fewer points onto the
+        voxel map of the other (its normals are better sampled)."""
         old, new = self.keyframes[j], self.keyframes[k]
-        if j not in maps:
-            maps[j] = VoxelMap(self.voxel_size, **self.map_options)
-            maps[j].insert(old.points, old.frame)
         Z0 = invert(old.pose) @ new.pose
         C_chain = self._chain_covariance(poses, old.frame, new.frame)
-        fit = register_submap(
-            new.points,
-            maps[j],
-            Z0,
-            C_chain,
-            kernel=self.kernel,
-            kernel_start=self.kernel_start,
-            kernel_decay=self.kernel_decay,
-            max_iter=self.max_iter,
-            tolerance=self.tolerance,
-        )
-        # the registration's information (left, old frame) → right perturbation of Z
-        A = adjoint(fit["T"])
-        info = self.info_scale * (A.T @ fit["H"] @ A)
-        info = 0.5 * (info + info.T)
+        opts = {
+            "kernel": self.kernel,
+            "kernel_start": self.kernel_start,
+            "kernel_decay": self.kernel_decay,
+            "max_iter": self.max_iter,
+            "tolerance": self.tolerance,
+        }
+        if len(new.points) <= len(old.points):
+            fit = register_submap(new.points, self._submap(j, maps), Z0, C_chain, **opts)
+            Z = fit["T"]
+            # information (left, old frame) → right perturbation of Z
+            A = adjoint(Z)
+            info = A.T @ fit["H"] @ A
+        else:
+            A = adjoint(Z0)
+            fit = register_submap(
+                old.points, self._submap(k, maps), invert(Z0), A @ C_chain @ A.T, **opts
+            )
+            Z = invert(fit["T"])
+            # W = Z⁻¹ with a left perturbation δ: Z exp(−δ), so the information is H itself
+            info = fit["H"]
+        info = self.info_scale * 0.5 * (info + info.T)
         try:
-            xi = log_se3(invert(Z0) @ fit["T"])
+            xi = log_se3(invert(Z0) @ Z)
             chi2 = float(xi @ np.linalg.solve(C_chain + np.linalg.pinv(info), xi))
         except np.linalg.LinAlgError:
             chi2 = math.inf
+        fit["T"] = Z
         accepted = bool(
             np.all(np.isfinite(fit["T"]))
             and fit["overlap"] >= self.min_overlap
@@ -568,7 +648,7 @@ class LoopCloser:
         """
         t0 = time.perf_counter()
         poses = np.asarray(poses, dtype=np.float64)
-        self._make_keyframes(poses)
+        self._make_keyframes(poses, first_frame)
         kfs = self.keyframes
         self.loops = []
         maps: dict[int, VoxelMap] = {}
@@ -589,6 +669,11 @@ class LoopCloser:
             g.add_edge(a, a + 1, invert(poses[fa]) @ poses[fb], _information(C))
         for e in loops:
             g.add_edge(e.old, e.new, e.Z, e.information, robust=True)
+        if self.prior_scale > 0:
+            for a, kf in enumerate(kfs[1:], start=1):
+                C = self._pose_cov.get(kf.frame)
+                if C is not None:
+                    g.add_prior(a, poses[kf.frame], self.prior_scale * _information(C))
         res = g.optimize(kernel=self.graph_kernel)
         self.last_result = res
         frames = np.array([kf.frame for kf in kfs])
