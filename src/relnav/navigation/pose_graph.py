@@ -549,11 +549,19 @@ class LoopCloser:
             centroid = T[:3, :3] @ Q.mean(0) + T[:3, 3]
             self.keyframes.append(_Keyframe(f, T.copy(), Q, centroid))
 
-    def _chain_covariance(self, poses: np.ndarray, f0: int, f1: int) -> np.ndarray:
-        """Covariance of the relative pose from frame ``f0`` to ``f1`` (composed steps)."""
-        steps = [invert(poses[f - 1]) @ poses[f] for f in range(f0 + 1, f1 + 1)]
-        covs = [self._step_cov.get(f, self._fallback) for f in range(f0 + 1, f1 + 1)]
-        return compose_step_covariances(steps, covs)
+    def _odometry(self, poses: np.ndarray) -> None:
+        """Relative pose and covariance (composed steps) from each keyframe to the next."""
+        self._odo: list[tuple[np.ndarray, np.ndarray]] = []
+        for a in range(len(self.keyframes) - 1):
+            fa, fb = self.keyframes[a].frame, self.keyframes[a + 1].frame
+            steps = [invert(poses[f - 1]) @ poses[f] for f in range(fa + 1, fb + 1)]
+            covs = [self._step_cov.get(f, self._fallback) for f in range(fa + 1, fb + 1)]
+            self._odo.append((invert(poses[fa]) @ poses[fb], compose_step_covariances(steps, covs)))
+
+    def _chain_covariance(self, j: int, k: int) -> np.ndarray:
+        """Covariance of the relative pose from keyframe ``j`` to ``k`` (composed edges)."""
+        edges = self._odo[j:k]
+        return compose_step_covariances([Z for Z, _ in edges], [C for _, C in edges])
 
     def _candidate(self, k: int) -> int | None:
         """The old keyframe nearest to keyframe ``k`` that passes the revisit tests."""
@@ -582,12 +590,12 @@ class LoopCloser:
             maps[k].insert(self.keyframes[k].points, self.keyframes[k].frame)
         return maps[k]
 
-    def _loop(self, poses: np.ndarray, j: int, k: int, maps: dict[int, VoxelMap]) -> LoopEdge:
+    def _loop(self, j: int, k: int, maps: dict[int, VoxelMap]) -> LoopEdge:
         """Register keyframes ``k`` (new) and ``j`` (old): the submap with fewer points onto the
         voxel map of the other (its normals are better sampled)."""
         old, new = self.keyframes[j], self.keyframes[k]
         Z0 = invert(old.pose) @ new.pose
-        C_chain = self._chain_covariance(poses, old.frame, new.frame)
+        C_chain = self._chain_covariance(j, k)
         opts = {
             "kernel": self.kernel,
             "kernel_start": self.kernel_start,
@@ -650,12 +658,13 @@ class LoopCloser:
         poses = np.asarray(poses, dtype=np.float64)
         self._make_keyframes(poses, first_frame)
         kfs = self.keyframes
+        self._odometry(poses)
         self.loops = []
         maps: dict[int, VoxelMap] = {}
         for k in range(len(kfs)):
             j = self._candidate(k)
             if j is not None:
-                self.loops.append(self._loop(poses, j, k, maps))
+                self.loops.append(self._loop(j, k, maps))
         loops = [e for e in self.loops if e.accepted]
         if len(kfs) < 2 or not loops:
             self.time_correct_s = time.perf_counter() - t0
@@ -663,10 +672,8 @@ class LoopCloser:
         g = PoseGraph()
         for kf in kfs:
             g.add_node(poses[kf.frame])
-        for a in range(len(kfs) - 1):
-            fa, fb = kfs[a].frame, kfs[a + 1].frame
-            C = self._chain_covariance(poses, fa, fb)
-            g.add_edge(a, a + 1, invert(poses[fa]) @ poses[fb], _information(C))
+        for a, (Z, C) in enumerate(self._odo):
+            g.add_edge(a, a + 1, Z, _information(C))
         for e in loops:
             g.add_edge(e.old, e.new, e.Z, e.information, robust=True)
         if self.prior_scale > 0:
