@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from relnav.errors import ConfigError
 from relnav.geometry.se3 import exp_se3, invert, log_se3
 from relnav.navigation import Navigator
 from relnav.navigation.pose_graph import (
@@ -182,3 +183,17 @@ def test_navigator_with_loop_closure_keeps_one_finite_pose_per_frame(loop_seq):
     true_step = np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).max()
     est_step = np.linalg.norm(np.diff(final_on[:, :3, 3], axis=0), axis=1)
     assert est_step.max() < 1.5 * true_step
+
+
+@pytest.mark.parametrize(
+    ("options", "needle"),
+    [
+        ({"keyframe_every": 0}, "must be >= 1"),
+        ({"loop_min_overlap": 1.5}, "must be >= 0 and <= 1"),
+        ({"loop_closure": "maybe"}, "loop_closure='maybe'"),
+        ({"loop_kernal": 5.0}, "did you mean 'loop_kernel'"),
+    ],
+)
+def test_bad_loop_option_is_a_config_error(options, needle):
+    with pytest.raises(ConfigError, match=needle):
+        Navigator(**options)

@@ -1,28 +1,55 @@
 """Revisits and pose-graph optimisation for relnav's navigator (option ``loop_closure``).
 
-Repeated orbits come back to surfaces already seen. The navigator keeps **keyframes** (every
-``keyframe_every`` accepted frames): the keyframe's pose ``T_target_sensor`` and a small submap,
-the scans of its last ``keyframe_window`` accepted frames expressed in the keyframe's sensor frame
-with the online relative poses (locally accurate). When a new keyframe's estimated pose is close to
-an old keyframe's (position and viewing direction; at least ``loop_min_separation`` keyframes
-older), the new submap is registered onto the old one with the navigator's own robust GICP
-(:func:`~relnav.navigation.gicp.solve_scan_to_map`, the old submap as a small
-:class:`~relnav.navigation.voxel_map.VoxelMap`), from the relative pose the trajectory predicts.
-The **loop edge** is kept only with evidence: overlap, robust residual, a non-degenerate
-information, and a correction consistent (χ²) with the odometry's covariance accumulated between
-the two keyframes.
+Repeated orbits come back to surfaces already seen. While tracking, the navigator hands every
+frame to :meth:`LoopCloser.observe` (its scan and its step's covariance from the filter); in
+:meth:`Navigator.finalize <relnav.navigation.navigator.Navigator.finalize>`,
+:meth:`LoopCloser.correct` works on the final (smoothed) trajectory:
 
-At the end of the run (:meth:`LoopCloser.correct`) the keyframes form an SE(3) **pose graph**:
-odometry edges between consecutive keyframes (their relative pose in the final trajectory, their
-covariance the composed per-step covariances of the navigator's filter) and the loop edges
-(Geman–McClure kernel, graduated from wide to tight). The optimised keyframes' corrections are
-interpolated on SE(3) over the frames between them.
+* **Keyframes** every ``every`` accepted frames, each with a submap: the accepted scans within
+  ``window`` frames of it, in its sensor frame, with the trajectory's relative poses (locally
+  accurate); the first keyframe's submap is its own scan (see :meth:`LoopCloser._make_keyframes`).
+* **Revisits**: a keyframe whose pose is close to an old keyframe's (at least ``min_separation``
+  keyframes older; distance below ``max_distance`` × range, viewing directions within
+  ``max_angle_deg``) is registered onto it with the navigator's own robust GICP
+  (:func:`~relnav.navigation.gicp.solve_scan_to_map`: the sparser submap onto a
+  :class:`~relnav.navigation.voxel_map.VoxelMap` of the denser one), from the relative pose the
+  trajectory predicts. The **loop edge** is kept only with evidence: overlap, robust residual, a
+  non-degenerate information, and a correction consistent (χ²) with the odometry's covariance
+  accumulated between the two keyframes.
+* **Pose graph**: odometry edges between consecutive keyframes (their relative pose, the composed
+  per-step covariances) and the loop edges (Geman–McClure kernel, graduated from wide to tight);
+  the first keyframe is the gauge. The optimised keyframes' corrections are interpolated on SE(3)
+  over the frames between them (:func:`interpolate_corrections`).
 
 Conventions: an edge ``(i, j, Z, Ω)`` measures ``Z ≈ X_i⁻¹ X_j`` with a right perturbation,
 ``X_i⁻¹ X_j = Z exp(ε)``, ``ε ~ N(0, Ω⁻¹)``, twists ``[ρ (m), φ (rad)]``; the residual is
 ``r = log(Z⁻¹ X_i⁻¹ X_j)``. The optimiser is Gauss–Newton on right perturbations
-``X ← X exp(δ)`` with per-edge robust weights (iteratively reweighted), sparse normal equations
-(:mod:`scipy.sparse`); the first node is fixed (it carries the trajectory's gauge).
+``X ← X exp(δ)`` with the first-order inverse right Jacobian, per-edge robust weights
+(iteratively reweighted) and sparse normal equations (:mod:`scipy.sparse`): dependency-free.
+:func:`scipy.optimize.least_squares` was not used because its robust loss acts on each residual
+component, not on an edge's χ², which is what a loop edge is accepted or rejected by.
+
+**[measured]** (navigation suite, ``benchmarks/nav_suite.py --methods relnav -O
+loop_closure=true``; APE m without → with): eros-ellipse-64 0.592 → 0.319, voyager-ellipse-128
+2.072 → 0.862, aura-ellipse-64 0.400 → 1.007, envisat-tumble-64 0.809 → 0.853;
+orion-inclined-64 (8.09) and the helical approaches have no revisit (unchanged); RPE equal or
+lower everywhere. Cost: 0.01 ms per frame while tracking, then 0.3 s per 250 frames in
+``finalize`` (≈ 1.1–1.2 ms per frame; 7–13 Gauss–Newton iterations, 25–95 ms, the rest is the
+~30 loop registrations). Hence ``loop_closure`` is off by default.
+
+**[interpretation, measured]** The navigator's error on these orbits is not odometry drift: it
+tracks against a map, and its error is the map's: on Eros and Voyager a rotation of the whole map
+about the target, set in the first frames (``T_est T_true⁻¹`` is a 1° and 2–3° rotation with < 0.15
+m of translation at the target's origin, about constant along the run). Only the revisits of the
+first keyframe (whose pose is the gauge) see it; a pose graph then spreads that edge's correction
+along the chain and carries it to every later frame. Where the map error really is common (Eros,
+Voyager) this removes half of the APE or more; where it varies around the orbit (Aura: 0.15–1.2°)
+the one anchor edge — measured closer to the truth than the trajectory (0.23 m / 0.49° against 0.30
+m / 0.78°) — alone raises the APE from 0.40 to 0.95 m. Nothing in the graph tells the two apart
+(every edge is satisfied after the optimisation). Keyframe priors (``prior_scale``: a map-relative
+error) strong enough to keep Aura near its baseline (scale ≥ 0.01: 0.38–0.52 m) take back the gains
+(Voyager 2.07 m, Eros 0.56–0.58 m). The loop registrations are over-confident (loop NEES median
+10–166 for 6 dof), the composed odometry covariances slightly conservative (median 1.0–4.8).
 """
 
 from __future__ import annotations
