@@ -347,11 +347,8 @@ def main(argv: list[str] | None = None) -> int:
         results[name] = {}
         for method in methods:
             try:
-                opts = (
-                    {k: float(v) for k, v in (o.split("=", 1) for o in a.options)}
-                    if method == "relnav"
-                    else {}
-                )
+                # strings: the navigator converts them to its options' types (bool, int, ...)
+                opts = dict(o.split("=", 1) for o in a.options) if method == "relnav" else {}
                 r = run_method(folders[name], method, **opts)
             except Exception as e:  # a missing extra, say: report and go on
                 r = {"error": f"{type(e).__name__}: {e}"}

@@ -133,6 +133,18 @@ OPTION_RANGES: dict[str, _Range] = {
     "alert_limit_t": (0, True, None, False),
     "alert_limit_r_deg": (0, True, 180, True),
     "protection_k": (0, False, None, False),
+    # its pose graph (loop_closure)
+    "keyframe_every": (1, True, None, False),
+    "keyframe_window": (0, True, None, False),
+    "loop_min_separation": (1, True, None, False),
+    "loop_max_distance": (0, False, None, False),
+    "loop_max_angle_deg": (0, False, 180, True),
+    "loop_min_overlap": (0, True, 1, True),
+    "loop_max_rms": (0, False, None, False),
+    "loop_chi2_gate": (0, False, None, False),
+    "loop_kernel": (0, False, None, False),
+    "loop_info_scale": (0, False, None, False),
+    "loop_prior_scale": (0, True, None, False),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""
