@@ -133,6 +133,20 @@ OPTION_RANGES: dict[str, _Range] = {
     "alert_limit_t": (0, True, None, False),
     "alert_limit_r_deg": (0, True, 180, True),
     "protection_k": (0, False, None, False),
+    "lost_after": (1, True, None, False),
+    "reloc_every": (1, True, None, False),
+    "reloc_radius": (0, False, None, False),
+    "reloc_tau": (0, False, None, False),
+    "reloc_epsilon": (0, False, None, False),
+    "reloc_gate": (0, False, None, False),
+    "reloc_candidates": (1, True, None, False),
+    "reloc_max_map_points": (6, True, None, False),
+    "reloc_max_scan_points": (6, True, None, False),
+    "reloc_rms_ratio": (0, False, None, False),
+    "reloc_chi2": (0, False, None, False),
+    "reloc_suspect_ratio": (0, False, None, False),
+    "reloc_min_support": (3, True, None, False),
+    "reloc_ambiguity": (0, True, 1, True),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""

@@ -45,6 +45,7 @@ from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
 from relnav.navigation.lie import log_se3
 from relnav.navigation.motion import ConstantVelocityFilter
+from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
@@ -130,6 +131,50 @@ class NavigatorConfig:
         ``step_sigma_r_deg`` and the whole 6×6 ``step_covariance``, body frame).
     protection_k : float
         Multiplier of the step's 1σ in the protection level.
+    relocalise : bool
+        Global re-localisation against the map with paper 1's descriptor pipeline when the
+        navigator is lost or makes a suspect jump (:mod:`relnav.navigation.relocalize`).
+    lost_after : int
+        Consecutive frames that are not ``ok`` after which the navigator is lost.
+    reloc_every : int
+        While lost, try to relocalise every this many frames.
+    reloc_method : {"clique", "gcc"}
+        Consistent matches by maximum clique or by paper 1's geometric consistency grouping.
+    reloc_descriptor : str
+        Descriptor of the map and the scan (``fpfh``, ``hods``, ``shot``, …).
+    reloc_radius : float
+        Descriptor support radius, multiples of ``s₀``.
+    reloc_tau : float
+        Descriptor-distance gate of the nearest-neighbour matching.
+    reloc_epsilon : float
+        Consistency tolerance of the pairwise distances, multiples of ``s₀``.
+    reloc_gate : float
+        Pair gate of the verifying registration, multiples of ``s₀``.
+    reloc_candidates : int
+        Candidate poses verified per attempt (disjoint consistent sets, largest first).
+    reloc_max_map_points, reloc_max_scan_points : int
+        Described map points (the map voxelised at ``s₀``) and scan points, at most.
+    reloc_rms_ratio : float
+        A relocalised pose must fit with a robust RMS at most this × the recent ``ok`` steps'
+        median; an ``ok`` step above it that is also a jump (see ``reloc_chi2``) is suspect.
+    reloc_chi2 : float
+        A step is a jump when it was recovered under the weak prior or its correction's χ²
+        against the motion model exceeds this (6 dof; 25: p ≈ 3·10⁻⁴), or it follows a
+        frame that was not ``ok``.
+    reloc_suspect_ratio : float
+        An ``ok`` step whose robust RMS exceeds this × the recent median is suspect even
+        without a jump.
+    reloc_min_support : int
+        Fewest consistent matches that make a candidate pose.
+    reloc_ambiguity : float
+        A relocalisation is refused when a quarter/half turn of the scan converges to another
+        pose whose fitness is at least ``1 −`` this times the best one's and whose RMS is at
+        most ``1 +`` this times its RMS (a near-symmetric target; see
+        :meth:`relnav.navigation.relocalize.Relocalizer._ambiguous`).
+    reloc_velocity : {"keep", "zero", "widen"}
+        The motion filter's velocity after a relocalisation: kept with its 1σ widened by
+        10 × the white acceleration, zeroed with the first frame's 1σ, or kept with the first
+        frame's 1σ (:meth:`relnav.navigation.relocalize.Relocalizer._reset_motion`).
     information : {"full", "normal"}
         The scan's information passed to the filter, the degeneracy test and the covariances:
         the solver's own (``full``, default: the map patches' normals and their weak in-plane
@@ -173,6 +218,24 @@ class NavigatorConfig:
     alert_limit_r_deg: float = 0.0
     protection_k: float = 3.0
     information: Literal["full", "normal"] = "full"
+    relocalise: bool = True
+    lost_after: int = 3
+    reloc_every: int = 1
+    reloc_method: Literal["clique", "gcc"] = "clique"
+    reloc_descriptor: str = "fpfh"
+    reloc_radius: float = 6.0
+    reloc_tau: float = 1.0
+    reloc_epsilon: float = 2.0
+    reloc_gate: float = 4.0
+    reloc_candidates: int = 3
+    reloc_max_map_points: int = 2000
+    reloc_max_scan_points: int = 400
+    reloc_rms_ratio: float = 1.5
+    reloc_chi2: float = 25.0
+    reloc_suspect_ratio: float = 2.0
+    reloc_min_support: int = 6
+    reloc_ambiguity: float = 0.3
+    reloc_velocity: Literal["keep", "zero", "widen"] = "keep"
 
 
 def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
@@ -271,6 +334,7 @@ class Navigator:
             [] if self.config.bootstrap_frames > 0 else None
         )
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
+        self.relocalizer = Relocalizer(self) if self.config.relocalise else None
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -310,6 +374,8 @@ class Navigator:
         self.pose = self._initial_pose.copy()
         self.n_frames, self._online, self._rescaled = 0, [], False
         self._boot_velocity = (v, P_vv)
+        if self.relocalizer is not None:
+            self.relocalizer = Relocalizer(self)
         out = last
         for P, t, n_raw in frames:
             out = self._track(P, t, n_raw, time.perf_counter())
@@ -354,6 +420,8 @@ class Navigator:
             result = RegistrationResult(
                 T_target_source=T_pred, status="failed", message=f"{type(e).__name__}: {e}"
             )
+        if self.relocalizer is not None:
+            result = self.relocalizer.check(P, T_pred, result, timings)
         used_prior = result.status != "ok"
         if result.status == "ok":
             if result.info.get("recovered"):
