@@ -142,6 +142,46 @@ def evaluate(
     return out
 
 
+def probe(seq: Any, start: float, every: int, back: int, opts: dict) -> dict[str, Any]:
+    """The relocaliser alone: the navigator tracks the first ``start`` × the frames, then each
+    ``every``-th later scan is located on that map from a prediction ``back`` frames old (the
+    navigator's pose then); a located pose is right when within 0.5 m and 5° of the full
+    run's online pose at that frame (the map's frame)."""
+    from relnav.navigation import Navigator
+
+    n = len(seq)
+    n0 = int(start * n)
+    full, _, _, _ = run(seq, list(range(n)), 1.0, **opts)
+    nav = Navigator(initial_pose=seq.gt_poses[0], **opts)
+    for k in range(n0):
+        nav.register_frame(seq[k])
+    assert nav.relocalizer is not None
+    right = wrong = refused = 0
+    why: dict[str, int] = {}
+    times = []
+    for k in range(n0 + back, n, every):
+        t = time.perf_counter()
+        fit, reason = nav.relocalizer.locate(seq[k].points, full[k - back])
+        times.append(time.perf_counter() - t)
+        if fit is None:
+            refused += 1
+            key = reason.split(":")[0].split(" (")[0]
+            key = "none verified" if key.startswith("none of") else key
+            why[key] = why.get(key, 0) + 1
+        elif _wrong(pose_error(fit["T"], full[k])):
+            wrong += 1
+        else:
+            right += 1
+    return {
+        "probes": right + wrong + refused,
+        "right": right,
+        "wrong": wrong,
+        "refused": refused,
+        "refused_why": why,
+        "ms": 1000 * float(np.median(times)) if times else float("nan"),
+    }
+
+
 def _timings(step: Any) -> dict[str, float]:
     return step.result.timings if step.result is not None else {}
 
@@ -162,6 +202,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument(
+        "--unmodified",
+        action="store_true",
+        help="only check that the unmodified sequences give the same poses with the feature on",
+    )
+    p.add_argument(
+        "--probe",
+        action="store_true",
+        help="the relocaliser alone: locate later scans on the map of the first 60%% of frames",
+    )
     a = p.parse_args(argv)
     from relnav.io.sequences import ScanSequence
 
@@ -178,6 +228,43 @@ def main(argv: list[str] | None = None) -> int:
     names = [s for s in a.only.split(",") if s]
     folders = simulate_suite(a.out, names)
     results = {}
+    if a.unmodified:
+        for name in names:
+            seq = ScanSequence(folders[name])
+            n = len(seq)
+            dt = float(np.median(np.diff(seq.timestamps)))
+            on = run(seq, list(range(n)), dt, **opts)
+            off = run(seq, list(range(n)), dt, **opts, relocalise=False)
+            att = [i for i, s in enumerate(on[2]) if "relocalise" in _timings(s)]
+            flips = [
+                i
+                for i, (x, y) in enumerate(zip(on[2], off[2], strict=True))
+                if x.status != y.status
+            ]
+            same = bool(np.array_equal(on[1], off[1]))
+            results[name] = {"identical": same, "attempts": att, "status_changed": flips}
+            print(
+                f"{name}: {n} frames, identical {same}, relocalisation attempts at {att}, "
+                f"status changed at {flips}, APE on {ape(on[1], seq.gt_poses):.3f} m, off "
+                f"{ape(off[1], seq.gt_poses):.3f} m",
+                flush=True,
+            )
+        if a.json:
+            a.json.write_text(json.dumps(results, indent=2))
+        return 0
+    if a.probe:
+        for name in names:
+            r = probe(ScanSequence(folders[name]), 0.6, 3, a.gap, opts)
+            results[name] = r
+            print(
+                f"{name}: {r['probes']} scans located from a prediction {a.gap} frames old: "
+                f"right {r['right']}, wrong {r['wrong']}, refused {r['refused']} "
+                f"{r['refused_why']}, {r['ms']:.0f} ms each",
+                flush=True,
+            )
+        if a.json:
+            a.json.write_text(json.dumps(results, indent=2))
+        return 0
     for name in names:
         r = evaluate(
             ScanSequence(folders[name]), name, a.kidnaps, a.gap, a.seed, a.recover_within, opts

@@ -159,11 +159,14 @@ class NavigatorConfig:
         median; an ``ok`` step above it that is also a jump (see ``reloc_chi2``) is suspect.
     reloc_chi2 : float
         A step is a jump when it was recovered under the weak prior or its correction's χ²
-        against the motion model exceeds this (6 dof; 25: p ≈ 3·10⁻⁴), or it follows a
-        frame that was not ``ok``.
+        against the motion model exceeds this (6 dof), or it follows a frame that was not
+        ``ok``. 25 flagged a right step of sim-orion (χ² 30–67 there on right steps), so the
+        navigator's own ``chi2_gate``.
     reloc_suspect_ratio : float
         An ``ok`` step whose robust RMS exceeds this × the recent median is suspect even
-        without a jump.
+        without a jump (at most ``lost_after`` such flags in a row; then the navigator's own
+        judgement stands). Measured: kidnaps 2.9–3.1×, right steps up to 2.3× (a 9-point
+        scan of iridium-helical-64).
     reloc_min_support : int
         Fewest consistent matches that make a candidate pose.
     reloc_ambiguity : float
@@ -231,8 +234,8 @@ class NavigatorConfig:
     reloc_max_map_points: int = 2000
     reloc_max_scan_points: int = 400
     reloc_rms_ratio: float = 1.5
-    reloc_chi2: float = 25.0
-    reloc_suspect_ratio: float = 2.0
+    reloc_chi2: float = 100.0
+    reloc_suspect_ratio: float = 2.5
     reloc_min_support: int = 6
     reloc_ambiguity: float = 0.3
     reloc_velocity: Literal["keep", "zero", "widen"] = "keep"

@@ -369,6 +369,7 @@ class Relocalizer:
         get_descriptor(nav.config.reloc_descriptor)  # ConfigError now, not at the first loss
         self.nav = nav
         self.lost = 0
+        self._doubted = 0
         self._since_attempt = 0
         self._recent_rms: deque[float] = deque(maxlen=20)
         self._views: list[np.ndarray] = []
@@ -398,6 +399,7 @@ class Relocalizer:
         suspect = (
             result.status == "ok"
             and np.isfinite(ref)
+            and self._doubted < c.lost_after
             and (
                 (jump and not rms <= c.reloc_rms_ratio * ref)
                 or not rms <= c.reloc_suspect_ratio * ref
@@ -414,6 +416,7 @@ class Relocalizer:
                 if found is not None:
                     out = found
                 elif suspect:
+                    self._doubted += 1
                     out = replace(
                         result,
                         T_target_source=T_pred,
@@ -427,6 +430,7 @@ class Relocalizer:
                 self._since_attempt += 1
         if out.status == "ok":
             self.lost = 0
+            self._doubted = 0
             self._since_attempt = 0
             self._map_version += 1
             r = float(out.info.get("robust_rms_sigma", float("nan")))
@@ -525,17 +529,34 @@ class Relocalizer:
         self._model = (self._map_version, model)
         return model
 
-    def _relocalise(
-        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float, timings: dict
-    ) -> RegistrationResult | None:
-        """Candidates from the descriptor pipeline, verified by the navigator's registration;
-        the best accepted one as an ``ok`` result, or None."""
+    def locate(
+        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float | None = None
+    ) -> tuple[dict[str, Any] | None, str]:
+        """Locate the scan ``P`` (sensor frame) on the map; nothing in the navigator changes.
+
+        Parameters
+        ----------
+        P : (N, 3) float64
+            Scan points, sensor frame, m.
+        T_pred : (4, 4) float64
+            The motion model's prediction ``T_target_sensor`` (a candidate must fit better).
+        ref_rms : float, optional
+            Robust RMS of the recent ``ok`` steps (σ units); their median by default.
+
+        Returns
+        -------
+        fit : dict or None
+            The verified registration (``T``, ``H``, ``fitness``, ``rms``, ``overlap``, …, and
+            ``support``: the consistent matches of its candidate), None when refused.
+        why : str
+            What happened (for the log and the step's message).
+        """
         nav, c = self.nav, self.nav.config
         if nav.map is None or len(P) < c.min_points:
-            return None
-        self.attempts += 1
+            return None, "no map or too few points"
+        if ref_rms is None:
+            ref_rms = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
         s0 = nav.spacing0
-        t0 = time.perf_counter()
         model = self._model_description()
         scan = describe(
             P,
@@ -544,7 +565,6 @@ class Relocalizer:
             max_keypoints=c.reloc_max_scan_points,
             seed=nav.n_frames,
         )
-        t_describe = time.perf_counter() - t0
         cands = candidate_poses(
             scan,
             model,
@@ -554,13 +574,14 @@ class Relocalizer:
             n_candidates=c.reloc_candidates,
             min_size=c.reloc_min_support,
         )
+        if not cands:
+            return None, "no consistent set of descriptor matches"
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), s0)
         gate = max(c.reloc_gate * s0, 2.0 * nav.map.voxel_size)
         pred = nav._solve(P, T_pred, nav._weak_prior(T_pred), gate, rng, radius)
         limit = c.reloc_rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc_rms_ratio
         best: dict[str, Any] | None = None
-        tried = []
         for T0, support in cands:
             fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius)
             ok = (
@@ -571,32 +592,44 @@ class Relocalizer:
                 and fit["rms"] <= limit
                 and fit["fitness"] > pred["fitness"]
             )
-            tried.append((support, fit["overlap"], fit["fitness"], fit["rms"], ok))
+            log.debug(
+                "frame %d: candidate of %d matches: overlap %.2f fitness %.2f rms %.2f (%s); "
+                "prediction fitness %.2f",
+                nav.n_frames,
+                support,
+                fit["overlap"],
+                fit["fitness"],
+                fit["rms"],
+                "verified" if ok else "refused",
+                pred["fitness"],
+            )
             if ok and (best is None or fit["fitness"] > best["fitness"]):
-                best = {**fit, "support": support}
-        log.debug(
-            "frame %d: relocalisation, %d candidates %s, prediction fitness %.2f rms %.2f",
-            nav.n_frames,
-            len(cands),
-            tried,
-            pred["fitness"],
-            pred["rms"],
-        )
+                best = {**fit, "support": support, "gate": gate, "n_candidates": len(cands)}
         if best is None:
-            return None
+            return None, f"none of {len(cands)} candidates verified"
         other = self._ambiguous(P, best, gate, rng, radius)
         if other is not None:
-            log.info(
-                "frame %d: relocalisation rejected, ambiguous: a pose %.2f m / %.1f° away fits "
-                "as well (fitness %.2f, rms %.2f against %.2f, %.2f)",
-                nav.n_frames,
-                *_distance(other["T"], best["T"]),
-                other["fitness"],
-                other["rms"],
-                best["fitness"],
-                best["rms"],
+            dt, dr = _distance(other["T"], best["T"])
+            return None, (
+                f"ambiguous: a pose {dt:.2f} m / {dr:.1f}° away fits as well (fitness "
+                f"{other['fitness']:.2f}, RMS {other['rms']:.2f} against {best['fitness']:.2f}, "
+                f"{best['rms']:.2f})"
             )
+        return best, "verified"
+
+    def _relocalise(
+        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float, timings: dict
+    ) -> RegistrationResult | None:
+        """:meth:`locate`, and the motion filter reset at the verified pose: an ``ok`` result,
+        or None (the reason is logged)."""
+        nav, c = self.nav, self.nav.config
+        self.attempts += 1
+        best, why = self.locate(P, T_pred, ref_rms)
+        if best is None:
+            log.info("frame %d: no relocalisation (%s)", nav.n_frames, why)
             return None
+        assert nav.map is not None
+        gate = best["gate"]
         self.successes += 1
         self._reset_motion()
         T, H = best["T"], best["H"]
@@ -618,8 +651,7 @@ class Relocalizer:
             "recovered": False,
             "relocalised": True,
             "reloc_support": best["support"],
-            "reloc_candidates": len(cands),
-            "reloc_describe_s": t_describe,
+            "reloc_candidates": best["n_candidates"],
         }
         jump, ang = _distance(T, T_pred)
         log.info(
