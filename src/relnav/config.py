@@ -145,6 +145,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "reloc_rms_ratio": (0, False, None, False),
     "reloc_chi2": (0, False, None, False),
     "reloc_suspect_ratio": (0, False, None, False),
+    "reloc_overlap_ratio": (0, True, 1, True),
     "reloc_min_support": (3, True, None, False),
     "reloc_ambiguity": (0, True, 1, True),
 }
