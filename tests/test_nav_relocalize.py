@@ -113,6 +113,17 @@ def test_random_points_do_not_relocalise(orbit):
     assert all(s.status != "ok" for s in steps[12:])
 
 
+def test_attempts_are_spaced_while_lost(orbit):
+    rng = np.random.default_rng(3)
+    junk = [rng.normal(size=(250, 3)) * 5.0 + [50.0, 0.0, 0.0] for _ in range(9)]
+    counts = []
+    for every in (1, 3):
+        nav, steps = _run(orbit, list(range(12)), reloc_every=every)
+        steps += [nav.register_frame(p) for p in junk]
+        counts.append(_attempted(steps))
+    assert counts[0] >= 6 and counts[1] < counts[0]
+
+
 def test_unrelated_object_does_not_relocalise(orbit, other_target):
     nav, steps = _run(orbit, list(range(12)))
     for k in range(len(other_target)):

@@ -146,6 +146,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "reloc_chi2": (0, False, None, False),
     "reloc_suspect_ratio": (0, False, None, False),
     "reloc_overlap_ratio": (0, True, 1, True),
+    "reloc_max_doubt": (0, True, None, False),
     "reloc_min_support": (3, True, None, False),
     "reloc_ambiguity": (0, True, 1, True),
 }

@@ -37,7 +37,7 @@ every right step of the suite; 0.55–0.80 at kidnaps). **[interpretation, measu
 registration settles on a wrong pose that fits the scan 2–3× worse than the recent steps (χ²
 sometimes small: the prior holds the pose), the map is corrupted, and every later step tracks
 it without complaint. A suspect step that the relocaliser does not confirm is therefore
-flagged ``failed`` (pose = prediction, map untouched), at most ``lost_after`` times in a row
+flagged ``failed`` (pose = prediction, map untouched), at most ``reloc_max_doubt`` times in a row
 (then the navigator's own judgement stands again: a helical approach sees new surfaces whose
 RMS stays above a stale median, and a frozen map would never catch up).
 
@@ -75,7 +75,7 @@ from relnav.registration.result import RegistrationResult
 if TYPE_CHECKING:
     from relnav.navigation.navigator import Navigator
 
-__all__ = ["DescribedCloud", "Relocalizer", "candidate_poses", "max_clique"]
+__all__ = ["DescribedCloud", "Relocalizer", "candidate_poses", "describe", "max_clique"]
 
 log = logging.getLogger(__name__)
 
@@ -411,7 +411,7 @@ class Relocalizer:
         suspect = (
             result.status == "ok"
             and np.isfinite(ref)
-            and self._doubted < c.lost_after
+            and self._doubted < c.reloc_max_doubt
             and (
                 (jump and not rms <= c.reloc_rms_ratio * ref)
                 or not rms <= c.reloc_suspect_ratio * ref
