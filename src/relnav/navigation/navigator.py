@@ -189,7 +189,9 @@ class NavigatorConfig:
         A relocalisation is refused when a quarter/half turn of the scan converges to another
         pose whose fitness is at least ``1 −`` this times the best one's and whose RMS is at
         most ``1 +`` this times its RMS (a near-symmetric target; see
-        :meth:`relnav.navigation.relocalize.Relocalizer._ambiguous`).
+        :meth:`relnav.navigation.relocalize.Relocalizer._ambiguous`). **[measured]** With
+        ``--probe`` (108 scans of four sequences, see ``reloc_radius``): off 26 right / 7 wrong,
+        0.1 25 / 2, 0.3 23 / 0, 0.5 19 / 0.
     reloc_velocity : {"keep", "zero", "widen"}
         The motion filter's velocity after a relocalisation: kept with its 1σ widened by
         10 × the white acceleration, zeroed with the first frame's 1σ, or kept with the first
