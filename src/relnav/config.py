@@ -145,6 +145,22 @@ OPTION_RANGES: dict[str, _Range] = {
     "loop_kernel": (0, False, None, False),
     "loop_info_scale": (0, False, None, False),
     "loop_prior_scale": (0, True, None, False),
+    "lost_after": (1, True, None, False),
+    "reloc_every": (1, True, None, False),
+    "reloc_radius": (0, False, None, False),
+    "reloc_tau": (0, False, None, False),
+    "reloc_epsilon": (0, False, None, False),
+    "reloc_gate": (0, False, None, False),
+    "reloc_candidates": (1, True, None, False),
+    "reloc_max_map_points": (6, True, None, False),
+    "reloc_max_scan_points": (6, True, None, False),
+    "reloc_rms_ratio": (0, False, None, False),
+    "reloc_chi2": (0, False, None, False),
+    "reloc_suspect_ratio": (0, False, None, False),
+    "reloc_overlap_ratio": (0, True, 1, True),
+    "reloc_max_doubt": (0, True, None, False),
+    "reloc_min_support": (3, True, None, False),
+    "reloc_ambiguity": (0, True, 1, True),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""

@@ -94,15 +94,17 @@ class ConstantVelocityFilter:
         self._F = F
         return T_pred.copy(), self._pred[1][:6, :6].copy()
 
-    def widen(self, sigma_pose: np.ndarray) -> None:
-        """Add ``sigma_pose²`` (body frame, 6) to the predicted pose covariance, and the same
-        per frame period to the velocity's: the model was found wrong, trust the next scans."""
+    def widen(self, sigma_pose: np.ndarray, sigma_velocity: np.ndarray | None = None) -> None:
+        """Add ``sigma_pose²`` (body frame, 6) to the predicted pose covariance, and
+        ``sigma_velocity²`` (6, per second; default ``sigma_pose`` per frame period) to the
+        velocity's: the model was found wrong, trust the next scans."""
         assert self._pred is not None, "predict() first"
         T_pred, P, t = self._pred
         dt = max(t - self.t, 1e-9)
         P = P.copy()
         P[:6, :6] += np.diag(np.asarray(sigma_pose, dtype=float) ** 2)
-        P[6:, 6:] += np.diag((np.asarray(sigma_pose, dtype=float) / dt) ** 2)
+        sv = np.asarray(sigma_pose, dtype=float) / dt if sigma_velocity is None else sigma_velocity
+        P[6:, 6:] += np.diag(np.asarray(sv, dtype=float) ** 2)
         self._pred = (T_pred, P, t)
 
     def update(self, T_star: np.ndarray, H_left: np.ndarray) -> None:
