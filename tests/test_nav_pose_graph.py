@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from nav_scenarios import flash_orbit
 from relnav.errors import ConfigError
 from relnav.geometry.se3 import exp_se3, invert, log_se3
 from relnav.navigation import Navigator
@@ -134,25 +135,7 @@ def loop_seq(tmp_path_factory):
     """90 frames of a 64×64 flash LIDAR on 2.5 loops of an ellipse around an asteroid (revisits
     every 36 frames)."""
     out = tmp_path_factory.mktemp("nav-loop") / "seq"
-    sc = {
-        "name": "nav-loop-test",
-        "seed": 5,
-        "frames": 90,
-        "dt": 155.0,
-        "format": "npy",
-        "target": {"name": "asteroid", "scale_to": 14.0},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
-        "trajectory": {
-            "kind": "elliptic-orbit",
-            "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},
-        },
-    }
+    sc = flash_orbit("nav-loop-test", seed=5, frames=90, dt=155.0)
     simulate(sc, out)
     from relnav.io.sequences import ScanSequence
 

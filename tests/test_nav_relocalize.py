@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from nav_scenarios import flash_orbit
 from relnav.errors import ConfigError
 from relnav.geometry.se3 import invert
 from relnav.navigation import Navigator
@@ -16,36 +17,12 @@ from relnav.scan import Scan
 from relnav.sim.scenario import simulate
 
 
-def _scenario(name: str, target: dict, frames: int) -> dict:
-    """An elliptic orbit at ~50 m, 64×64 flash LIDAR (2 cm noise), 3.6° of orbit per frame."""
-    return {
-        "name": name,
-        "seed": 3,
-        "frames": 250,
-        "max_frames": frames,
-        "dt": 55.5,
-        "format": "npy",
-        "target": target,
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
-        "trajectory": {
-            "kind": "elliptic-orbit",
-            "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},
-        },
-    }
-
-
 @pytest.fixture(scope="module")
 def orbit(tmp_path_factory):
     from relnav.io.sequences import ScanSequence
 
     out = tmp_path_factory.mktemp("reloc") / "seq"
-    simulate(_scenario("reloc-test", {"name": "asteroid", "scale_to": 14.0}, 36), out)
+    simulate(flash_orbit("reloc-test", max_frames=36), out)
     return ScanSequence(out)
 
 
@@ -55,7 +32,9 @@ def other_target(tmp_path_factory):
     from relnav.io.sequences import ScanSequence
 
     out = tmp_path_factory.mktemp("reloc") / "other"
-    simulate(_scenario("reloc-other", {"name": "envisat", "scale_to": 14.0}, 6), out)
+    simulate(
+        flash_orbit("reloc-other", max_frames=6, target={"name": "envisat", "scale_to": 14.0}), out
+    )
     return ScanSequence(out)
 
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from nav_scenarios import flash_orbit
 from relnav.geometry.se3 import adjoint, exp_se3, invert, log_se3
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.motion import ConstantVelocityFilter
@@ -18,26 +19,7 @@ from relnav.sim.scenario import simulate
 def orbit_seq(tmp_path_factory):
     """30 frames of a 64×64 flash LIDAR (2 cm noise) on an ellipse around an asteroid at ~50 m."""
     out = tmp_path_factory.mktemp("nav") / "seq"
-    sc = {
-        "name": "nav-test",
-        "seed": 3,
-        "frames": 250,
-        "max_frames": 30,
-        "dt": 55.5,
-        "format": "npy",
-        "target": {"name": "asteroid", "scale_to": 14.0},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
-        "trajectory": {
-            "kind": "elliptic-orbit",
-            "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},
-        },
-    }
+    sc = flash_orbit("nav-test", max_frames=30)
     simulate(sc, out)
     from relnav.io.sequences import ScanSequence
 

@@ -1,0 +1,40 @@
+"""Scenarios shared by the navigator's tests (imported by them; not a test module)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def flash_orbit(
+    name: str,
+    *,
+    seed: int = 3,
+    frames: int = 250,
+    dt: float = 55.5,
+    max_frames: int | None = None,
+    target: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """2.5 loops of an elliptic orbit (55 × 42 m, tilted 20°) around ``target`` (default the
+    procedural asteroid, 14 m) seen by a 64×64 flash LIDAR with 2 cm range noise."""
+    sc: dict[str, Any] = {
+        "name": name,
+        "seed": seed,
+        "frames": frames,
+        "dt": dt,
+        "format": "npy",
+        "target": target or {"name": "asteroid", "scale_to": 14.0},
+        "sensors": [
+            {
+                "preset": "goldeneye",
+                "name": "flash",
+                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
+            }
+        ],
+        "trajectory": {
+            "kind": "elliptic-orbit",
+            "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},
+        },
+    }
+    if max_frames is not None:
+        sc["max_frames"] = max_frames
+    return sc
