@@ -493,7 +493,13 @@ class Navigator:
                 T_target_source=T_pred, status="failed", message=f"{type(e).__name__}: {e}"
             )
         if self.relocalizer is not None:
-            result = self.relocalizer.check(P, T_pred, result, timings)
+            try:
+                result = self.relocalizer.check(P, T_pred, result, timings)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
+                # never lose a frame to the relocaliser: the step keeps its own judgement
+                log.warning(
+                    "frame %d: relocalisation raised %s: %s", self.n_frames, type(e).__name__, e
+                )
         used_prior = result.status != "ok"
         if result.status == "ok":
             if result.info.get("recovered"):
