@@ -150,11 +150,13 @@ def test_multiview_refines_all_poses_anchored_at_frame_0(method: str) -> None:
     assert mv.n_frames == 8 and mv.frame_poses.shape == (8, 4, 4)
     assert [h["accepted"] for h in mv.history] == [True] * 8
     assert all("refine_shift" in h and h["multiview_seconds"] >= 0 for h in mv.history[1:])
-    # the refined poses are no worse than the sequential ones (2 mm noise; measured RMS
-    # 1.8 mm sequential, 1.9-2.1 mm multiview on this case: same level, not better)
+    # the refined poses are no worse than the sequential ones (2 mm noise; measured RMS over
+    # _frames seeds 0-2: sequential 1.7-3.0 mm, graph 1.2-2.0 mm (ratio 0.68-0.77),
+    # leave-one-out 1.5-3.2 mm (ratio 0.88-1.11): the same level)
     e_seq, e_mv = _pose_errors_mm(seq, poses), _pose_errors_mm(mv, poses)
     assert e_mv.max() < 5.0
-    assert np.sqrt(np.mean(e_mv**2)) < 1.5 * np.sqrt(np.mean(e_seq**2))
+    ratio = np.sqrt(np.mean(e_mv**2)) / np.sqrt(np.mean(e_seq**2))
+    assert ratio < (1.0 if method == "graph" else 1.2)
     # the model is the union of the frames at the refined poses
     assert mv.points.shape[0] > 3000
     np.testing.assert_allclose(invert(mv.T_model_frame), poses[7] @ invert(poses[0]), atol=0.02)

@@ -37,6 +37,31 @@ rotation-invariant CGA registration (:class:`~relnav.fusion.cross_source.
 CrossSourceRegistration`, used here same-source) provides a global start and ICP is re-run from
 it; the better result (quality, then RMSE) is kept.
 
+**Multi-view refinement** (``multiview=True``, off by default) **[interpretation]** of paper 2's
+unspecified "multi-view ICP": the sequential scheme above writes each registration's error into
+the model, where every later frame inherits it (docs/results/paper2/observer_bias.md). With
+``multiview`` the model keeps every accepted frame (voxel-downsampled, in its own ``S_j``) and
+its pose ``T_{M,S_j}``; after frame ``k`` has been registered as above, all poses but frame 0's
+(which defines ``M``) are refined jointly, the model is rebuilt as the voxel-downsampled union of
+the frames at the refined poses, and the observation of frame ``k`` is its refined pose (the
+poses of earlier frames change, their emitted observations do not). ``multiview_method``:
+
+* ``"graph"`` (default) — a pose graph: frame ``k`` is registered onto each stored frame within
+  ``multiview_max_angle_deg`` (70°) of attitude (its neighbours and, on return, the first
+  frames: loop closures); each pairwise result is an edge ``T_{S_j,S_k}`` weighted by its ICP
+  information; with ``multiview_model_edges`` (default) the frame → model registration is kept
+  as an edge from frame 0 too. Gauss–Newton over all edges collected so far, frame 0 fixed
+  (:class:`relnav.navigation.pose_graph.PoseGraph`).
+* ``"leave-one-out"`` — rounds (``multiview_rounds``) of re-registering every frame onto the
+  union of all the others at their current poses (Gauss–Seidel, frame 0 fixed).
+
+**[measured]** (``benchmarks/paper2_experiment.py --model-option multiview=true``, see
+docs/results/paper2/multiview.md): neither scheme removes the observer's error. The graph
+closes the loop about the spin axis (spin-attitude error and bias down) and lowers the
+y-position bias, but pairwise edges between partial views constrain the tilt poorly (tilt
+attitude errors up); leave-one-out rounds do not converge (each round moves the frames by
+millimetres; more rounds, larger errors). Off by default.
+
 Uncertainty of the observation (``last_covariance`` after each accepted frame, ``(6, 6)`` of
 ``[δD (m, sensor frame), δθ (rad, body axes: Q_true = Q ⊗ exp(δθ))]``), ``covariance=``:
 
@@ -49,7 +74,8 @@ Uncertainty of the observation (``last_covariance`` after each accepted frame, `
   is re-registered without each block (warm start at the accepted pose) and the covariance of
   the ``K`` observations is ``(K − 1)/K Σ (δᵢ − δ̄)(δᵢ − δ̄)ᵀ``, plus the ``"icp"`` term as a
   floor. Blocks keep spatially correlated errors together, so what one region of the frame
-  pulls into the pose shows up as spread. Uses only the measurements.
+  pulls into the pose shows up as spread. Uses only the measurements. With ``multiview`` the
+  blocks are re-registered, from the refined pose, onto the union of the other frames.
 * ``"none"`` — ``last_covariance = None`` (the filter's fixed noise).
 """
 
@@ -231,8 +257,8 @@ class ContourModel:
         multiview_method: str = "graph",
         multiview_rounds: int = 2,
         multiview_tol: float = 0.05,
-        multiview_max_angle_deg: float = 50.0,
-        multiview_model_edges: bool = False,
+        multiview_max_angle_deg: float = 70.0,
+        multiview_model_edges: bool = True,
     ) -> None:
         if voxel_size is not None and not (float(voxel_size) > 0):
             raise ConfigError(f"voxel_size must be > 0, got {voxel_size}")
