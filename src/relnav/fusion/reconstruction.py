@@ -234,6 +234,8 @@ class ContourModel:
     multiview_max_angle_deg : float
         ``"graph"``: pair the new frame with the stored frames whose attitude is within this
         angle (deg) of its own.
+    multiview_model_edges : bool
+        ``"graph"``: keep each frame → model registration as an edge from frame 0.
 
     Examples
     --------
@@ -439,7 +441,7 @@ class ContourModel:
             target = self._union(exclude=len(self._poses) - 1)
             res = self._last_refined if self._last_refined is not None else res
             self.last_result = res
-            q = self._quality(src, res, cKDTree(target))
+            q = self._quality_at(src, T, cKDTree(target))
             if self.covariance != "none":
                 self.last_covariance = self._observation_covariance(src, T, res, target)
             self._model = self._union(exclude=None, grow=True)
@@ -484,8 +486,11 @@ class ContourModel:
         """Fraction of frame points within ``quality_gate × voxel`` of the model."""
         if not res.ok:
             return 0.0
+        return self._quality_at(src, res.T_target_source, tree)
+
+    def _quality_at(self, src: np.ndarray, T: np.ndarray, tree: cKDTree) -> float:
+        """Fraction of frame points within ``quality_gate × voxel`` of the model at ``T``."""
         assert self._voxel is not None
-        T = res.T_target_source
         d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=self._gate())
         return float(np.mean(np.isfinite(d))) if d.size else 0.0
 
@@ -590,9 +595,11 @@ class ContourModel:
         ``reject_fitness`` is an edge ``Z_jk ≈ T_{S_j,S_k}`` with the inverse of its ICP
         covariance as information (moved to a right perturbation). The edges of all frames
         are kept; the graph (frame 0 fixed) is solved by Gauss–Newton
-        (:class:`relnav.navigation.pose_graph.PoseGraph`) from the current poses. A frame
-        without an accepted edge is tied to the model instead (the sequential registration,
-        ``T_seq``, as a prior).
+        (:class:`relnav.navigation.pose_graph.PoseGraph`) from the current poses. With
+        ``multiview_model_edges`` — and always for a frame without an accepted pairwise edge —
+        the frame → model registration ``T_seq`` is kept as an edge from frame 0 (a prior on
+        ``T_{M,S_k}``, information from its ICP covariance). The observation's ``"icp"``
+        covariance term stays that of the frame → model registration.
 
         Returns
         -------
