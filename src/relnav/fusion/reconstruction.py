@@ -51,7 +51,8 @@ poses of earlier frames change, their emitted observations do not). ``multiview_
   frames: loop closures); each pairwise result is an edge ``T_{S_j,S_k}`` weighted by its ICP
   information; with ``multiview_model_edges`` (default) the frame → model registration is kept
   as an edge from frame 0 too. Gauss–Newton over all edges collected so far, frame 0 fixed
-  (:class:`relnav.navigation.pose_graph.PoseGraph`).
+  (the conventions of :class:`relnav.navigation.pose_graph.PoseGraph`, without its robust
+  kernel; solved here because ``navigation`` sits above ``fusion``).
 * ``"leave-one-out"`` — rounds (``multiview_rounds``) of re-registering every frame onto the
   union of all the others at their current poses (Gauss–Seidel, frame 0 fixed).
 
@@ -594,8 +595,8 @@ class ContourModel:
         ``multiview_max_angle_deg`` of its own; each registration whose quality reaches
         ``reject_fitness`` is an edge ``Z_jk ≈ T_{S_j,S_k}`` with the inverse of its ICP
         covariance as information (moved to a right perturbation). The edges of all frames
-        are kept; the graph (frame 0 fixed) is solved by Gauss–Newton
-        (:class:`relnav.navigation.pose_graph.PoseGraph`) from the current poses. With
+        are kept; the graph (frame 0 fixed) is solved by Gauss–Newton (:func:`_solve_pose_graph`)
+        from the current poses. With
         ``multiview_model_edges`` — and always for a frame without an accepted pairwise edge —
         the frame → model registration ``T_seq`` is kept as an edge from frame 0 (a prior on
         ``T_{M,S_k}``, information from its ICP covariance). The observation's ``"icp"``
@@ -609,7 +610,6 @@ class ContourModel:
         """
         from relnav.geometry.rotations import rotation_angle
         from relnav.geometry.se3 import adjoint
-        from relnav.navigation.pose_graph import PoseGraph
 
         assert self._voxel is not None
         n = len(self._poses)
@@ -635,11 +635,6 @@ class ContourModel:
                 continue
             self._edges[(j, k)] = (Z, info)
             added += 1
-        g = PoseGraph()
-        for T in self._poses:
-            g.add_node(T)
-        for (i, j), (Z, info) in self._edges.items():
-            g.add_edge(i, j, Z, info)
         if added == 0 or self.multiview_model_edges:
             # the frame → model registration as an edge from frame 0 (= M)
             C = res_seq.covariance
@@ -649,15 +644,12 @@ class ContourModel:
                 else np.eye(6) / self._voxel**2
             )
             self._priors[k] = (T_seq, info)
-        for j, (T, info) in self._priors.items():
-            g.add_prior(j, T, info)
-        out = g.optimize(fixed=(0,))
         before = self._poses
-        self._poses = [out.poses[i] for i in range(n)]
+        self._poses, iterations = _solve_pose_graph(self._poses, self._edges, self._priors)
         self._last_refined = None
         pairs = zip(self._frames, before, self._poses, strict=True)
         shift = max((_rms_shift(F, a, b) for F, a, b in pairs), default=0.0)
-        return {"refine_edges": added, "refine_shift": shift, "refine_iterations": out.iterations}
+        return {"refine_edges": added, "refine_shift": shift, "refine_iterations": iterations}
 
     def _global(self, src: np.ndarray) -> RegistrationResult | None:
         from relnav.fusion.cross_source import CrossSourceRegistration
@@ -725,3 +717,89 @@ def _rms_shift(F: np.ndarray, T_a: np.ndarray, T_b: np.ndarray) -> float:
         return 0.0
     D = F @ (T_b[:3, :3] - T_a[:3, :3]).T + (T_b[:3, 3] - T_a[:3, 3])
     return float(np.sqrt(np.mean(np.sum(D * D, axis=1))))
+
+
+def _solve_pose_graph(
+    poses: list[np.ndarray],
+    edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    priors: dict[int, tuple[np.ndarray, np.ndarray]],
+    *,
+    max_iter: int = 20,
+    tolerance: float = 1e-9,
+) -> tuple[list[np.ndarray], int]:
+    """Gauss–Newton on an SE(3) pose graph, node 0 fixed (dense normal equations).
+
+    Parameters
+    ----------
+    poses : list of (4, 4) float64
+        Initial node poses ``X_i``.
+    edges : dict
+        ``(i, j) -> (Z, Ω)``: ``Z ≈ X_i⁻¹ X_j`` with information ``Ω`` (6, 6) of a right
+        perturbation ``X_i⁻¹ X_j = Z exp(ε)``, twists ``[ρ (m), φ (rad)]``.
+    priors : dict
+        ``j -> (T, Ω)``: ``T ≈ X_j``, same conventions.
+    max_iter : int
+        Iterations at most.
+    tolerance : float
+        Stop when the largest update component is below this (m and rad).
+
+    Returns
+    -------
+    poses : list of (4, 4) float64
+        Optimised poses (node 0 unchanged).
+    iterations : int
+        Iterations run.
+
+    Notes
+    -----
+    Residual ``r = log(Z⁻¹ X_i⁻¹ X_j)``, updates ``X ← X exp(δ)``, Jacobians with the
+    first-order inverse right Jacobian ``J_r⁻¹(r) ≈ I + ½ ad(r)`` (as
+    :class:`relnav.navigation.pose_graph.PoseGraph`).
+    """
+    from relnav.geometry.rotations import hat
+    from relnav.geometry.se3 import adjoint, exp_se3, log_se3
+
+    def ad(xi: np.ndarray) -> np.ndarray:
+        A = np.zeros((6, 6))
+        A[:3, :3] = A[3:, 3:] = hat(xi[3:])
+        A[:3, 3:] = hat(xi[:3])
+        return A
+
+    X = [np.array(T, dtype=np.float64) for T in poses]
+    n = len(X)
+    m = 6 * (n - 1)
+    it = 0
+    if m == 0:
+        return X, 0
+    terms = [(i, j, invert(Z), L) for (i, j), (Z, L) in edges.items()]
+    terms += [(-1, j, invert(T), L) for j, (T, L) in priors.items()]
+    while it < max_iter:
+        it += 1
+        H = np.zeros((m, m))
+        g = np.zeros(m)
+        for i, j, Zi, L in terms:
+            Xi = X[i] if i >= 0 else np.eye(4)
+            r = log_se3(Zi @ invert(Xi) @ X[j])
+            Jj = np.eye(6) + 0.5 * ad(r)
+            blocks = [(j, Jj)]
+            if i >= 0:
+                blocks.append((i, -Jj @ adjoint(invert(X[j]) @ Xi)))
+            for a, Ja in blocks:
+                if a == 0:
+                    continue
+                sa = slice(6 * (a - 1), 6 * a)
+                g[sa] += Ja.T @ L @ r
+                for b, Jb in blocks:
+                    if b == 0:
+                        continue
+                    H[sa, 6 * (b - 1) : 6 * b] += Ja.T @ L @ Jb
+        H += np.diag(1e-9 * np.diag(H) + 1e-12)
+        delta = np.linalg.solve(H, -g).reshape(-1, 6)
+        if not np.all(np.isfinite(delta)):
+            log.warning("ContourModel: non-finite pose-graph update, refinement stopped")
+            break
+        for a in range(1, n):
+            X[a] = X[a] @ exp_se3(delta[a - 1])
+        if float(np.max(np.abs(delta))) < tolerance:
+            break
+    return X, it
