@@ -37,6 +37,35 @@ rotation-invariant CGA registration (:class:`~relnav.fusion.cross_source.
 CrossSourceRegistration`, used here same-source) provides a global start and ICP is re-run from
 it; the better result (quality, then RMSE) is kept.
 
+**Multi-view refinement** (``multiview=True``, off by default) **[interpretation]** of paper 2's
+unspecified "multi-view ICP": the sequential scheme above writes each registration's error into
+the model, where every later frame inherits it (docs/results/paper2/observer_bias.md). With
+``multiview`` the model keeps every accepted frame (voxel-downsampled, in its own ``S_j``) and
+its pose ``T_{M,S_j}``; after frame ``k`` has been registered as above, all poses but frame 0's
+(which defines ``M``) are refined jointly, the model is rebuilt as the voxel-downsampled union of
+the frames at the refined poses, and the observation of frame ``k`` is its refined pose (the
+poses of earlier frames change, their emitted observations do not). ``multiview_method``:
+
+* ``"graph"`` (default) — a pose graph: frame ``k`` is registered onto each stored frame within
+  ``multiview_max_angle_deg`` (70°) of attitude (its neighbours and, on return, the first
+  frames: loop closures); each pairwise result is an edge ``T_{S_j,S_k}`` weighted by its ICP
+  information; with ``multiview_model_edges`` (default) the frame → model registration is kept
+  as an edge from frame 0 too. Gauss–Newton over all edges collected so far, frame 0 fixed
+  (the conventions of :class:`relnav.navigation.pose_graph.PoseGraph`, without its robust
+  kernel; solved here because ``navigation`` sits above ``fusion``).
+* ``"leave-one-out"`` — rounds (``multiview_rounds``) of re-registering every frame onto the
+  union of all the others at their current poses (Gauss–Seidel, frame 0 fixed).
+
+**[measured]** (``benchmarks/paper2_experiment.py --seeds 20 --model-option multiview=true``,
+docs/results/paper2/multiview.md): neither scheme removes the observer's error. The graph closes
+the loop about the spin axis (spin-attitude RMS 1.4 → 0.47°) and lowers the position RMS (10 /
+10 / 2.3 → 7.5 / 8.1 / 1.0 mm; y bias −5.4 → −0.06 mm, x bias unchanged at −5.7 mm), but the
+tilt gets worse (0.31 / 0.6 → 0.45 / 0.85°): **[interpretation]** pairwise edges between partial
+views constrain it less than one registration onto the whole model. The tracker's NEES goes
+61.7 → 32.9 and its NIS 14 → 9.8, both still outside their bands; the jackknife σ is still
+≈ 3.5× too small. Leave-one-out rounds do not converge: more rounds give larger errors. Same
+cost per sequence (≈ 19 s against 22 s for 16 frames). Off by default.
+
 Uncertainty of the observation (``last_covariance`` after each accepted frame, ``(6, 6)`` of
 ``[δD (m, sensor frame), δθ (rad, body axes: Q_true = Q ⊗ exp(δθ))]``), ``covariance=``:
 
@@ -49,7 +78,8 @@ Uncertainty of the observation (``last_covariance`` after each accepted frame, `
   is re-registered without each block (warm start at the accepted pose) and the covariance of
   the ``K`` observations is ``(K − 1)/K Σ (δᵢ − δ̄)(δᵢ − δ̄)ᵀ``, plus the ``"icp"`` term as a
   floor. Blocks keep spatially correlated errors together, so what one region of the frame
-  pulls into the pose shows up as spread. Uses only the measurements.
+  pulls into the pose shows up as spread. Uses only the measurements. With ``multiview`` the
+  blocks are re-registered, from the refined pose, onto the union of the other frames.
 * ``"none"`` — ``last_covariance = None`` (the filter's fixed noise).
 """
 
@@ -57,6 +87,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -187,6 +218,25 @@ class ContourModel:
         When the model grows beyond this, the voxel is enlarged by √2 until it fits.
     seed : int
         Seed of the CGA start (recorded in :attr:`history`).
+    covariance : {"jackknife", "icp", "none"}
+        Observation covariance (module docstring).
+    jackknife_blocks : int
+        Spatial blocks of the jackknife (≥ 4).
+    multiview : bool
+        Keep every accepted frame (voxel-downsampled, in its sensor frame) with its pose and
+        refine all poses but frame 0's after each new frame, then rebuild the model from the
+        refined poses (module docstring, "Multi-view refinement"). Off by default.
+    multiview_method : {"graph", "leave-one-out"}
+        How the poses are refined (module docstring).
+    multiview_rounds : int
+        ``"leave-one-out"``: rounds at most per frame (≥ 1).
+    multiview_tol : float
+        ``"leave-one-out"``: stop when no frame moved more than this many voxels (RMS).
+    multiview_max_angle_deg : float
+        ``"graph"``: pair the new frame with the stored frames whose attitude is within this
+        angle (deg) of its own.
+    multiview_model_edges : bool
+        ``"graph"``: keep each frame → model registration as an edge from frame 0.
 
     Examples
     --------
@@ -209,6 +259,12 @@ class ContourModel:
         seed: int = 0,
         covariance: str = "jackknife",
         jackknife_blocks: int = 10,
+        multiview: bool = False,
+        multiview_method: str = "graph",
+        multiview_rounds: int = 2,
+        multiview_tol: float = 0.05,
+        multiview_max_angle_deg: float = 70.0,
+        multiview_model_edges: bool = True,
     ) -> None:
         if voxel_size is not None and not (float(voxel_size) > 0):
             raise ConfigError(f"voxel_size must be > 0, got {voxel_size}")
@@ -247,18 +303,43 @@ class ContourModel:
             raise ConfigError(f"jackknife_blocks must be >= 4, got {jackknife_blocks}")
         self.covariance = covariance
         self.jackknife_blocks = int(jackknife_blocks)
+        if not isinstance(multiview, (bool, np.bool_)):
+            raise ConfigError(f"multiview must be a bool, got {multiview!r}")
+        if int(multiview_rounds) < 1 or int(multiview_rounds) != multiview_rounds:
+            raise ConfigError(f"multiview_rounds must be an integer >= 1, got {multiview_rounds}")
+        if not float(multiview_tol) > 0:
+            raise ConfigError(f"multiview_tol must be > 0, got {multiview_tol}")
+        if multiview_method not in ("graph", "leave-one-out"):
+            raise ConfigError(
+                f"multiview_method must be 'graph' or 'leave-one-out', got {multiview_method!r}"
+            )
+        if not 0 < float(multiview_max_angle_deg) <= 180:
+            raise ConfigError(
+                f"multiview_max_angle_deg must be in (0, 180], got {multiview_max_angle_deg}"
+            )
+        self.multiview = bool(multiview)
+        self.multiview_method = multiview_method
+        self.multiview_max_angle_deg = float(multiview_max_angle_deg)
+        self.multiview_model_edges = bool(multiview_model_edges)
+        self.multiview_rounds = int(multiview_rounds)
+        self.multiview_tol = float(multiview_tol)
         self.reset()
 
     def reset(self) -> None:
         """Forget the model and the pose history."""
         self._model = np.zeros((0, 3))
         self._poses: list[np.ndarray] = []  # T_model_frame of every accepted frame
+        self._frames: list[np.ndarray] = []  # multiview: downsampled cloud of each, in S_k
+        # multiview graph: (j, k) -> (Z = T_{S_j,S_k}, information (6, 6), right perturbation)
+        self._edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._priors: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # k -> (T_{M,S_k}, info)
         self._body_origin: np.ndarray | None = None
         self._voxel: float | None = self.voxel_size
         self.history: list[dict[str, Any]] = []
         self.last_result: RegistrationResult | None = None
         self.last_covariance: np.ndarray | None = None
         self.T_model_frame: np.ndarray | None = None
+        self._last_refined: RegistrationResult | None = None
 
     # ---- properties ---------------------------------------------------------------------
 
@@ -271,6 +352,12 @@ class ContourModel:
     def n_frames(self) -> int:
         """Frames merged into the model."""
         return len(self._poses)
+
+    @property
+    def frame_poses(self) -> np.ndarray:
+        """``T_model_frame`` ``(n_frames, 4, 4)`` of every accepted frame: as registered, or
+        as last refined with ``multiview`` (frame 0's is the identity)."""
+        return np.array(self._poses).reshape(-1, 4, 4)
 
     @property
     def body_origin(self) -> np.ndarray | None:
@@ -342,16 +429,34 @@ class ContourModel:
         if q < self.reject_fitness:
             return self._reject(pred, k, f"registration {res.status}, quality {q:.2f}")
         T = res.T_target_source
-        if self.covariance != "none":
-            self.last_covariance = self._observation_covariance(src, T, res)
-        self._merge(P, T)
-        self._poses.append(T)
+        entry: dict[str, Any] = {"frame": k, "accepted": True, "start": how}
+        if self.multiview:
+            t0 = time.perf_counter()
+            self._frames.append(src)
+            self._poses.append(T)
+            if self.multiview_method == "graph":
+                entry.update(self._refine_graph(T, res))
+            else:
+                entry.update(self._refine())
+            T = self._poses[-1]
+            target = self._union(exclude=len(self._poses) - 1)
+            res = self._last_refined if self._last_refined is not None else res
+            self.last_result = res
+            q = self._quality_at(src, T, cKDTree(target))
+            if self.covariance != "none":
+                self.last_covariance = self._observation_covariance(src, T, res, target)
+            self._model = self._union(exclude=None, grow=True)
+            entry["multiview_seconds"] = time.perf_counter() - t0
+        else:
+            if self.covariance != "none":
+                self.last_covariance = self._observation_covariance(src, T, res, self._model)
+            self._merge(P, T)
+            self._poses.append(T)
         self.T_model_frame = T
         obs = self._observation(T, q)
-        self.history.append(
-            {"frame": k, "accepted": True, "quality": q, "fitness": float(res.fitness),
-             "rmse": float(res.inlier_rmse), "start": how, "model_points": len(self._model)}
-        )  # fmt: skip
+        entry.update(quality=q, fitness=float(res.fitness), rmse=float(res.inlier_rmse),
+                     model_points=len(self._model))  # fmt: skip
+        self.history.append(entry)
         return obs
 
     # ---- internals ----------------------------------------------------------------------
@@ -365,8 +470,12 @@ class ContourModel:
         self._body_origin = P.mean(axis=0)
         T = np.eye(4)
         self._model = np.zeros((0, 3))
-        self._merge(P, T)
         self._poses.append(T)
+        if self.multiview:
+            self._frames.append(self._downsample(P))
+            self._model = self._union(exclude=None, grow=True)
+        else:
+            self._merge(P, T)
         self.T_model_frame = T
         self.history.append(
             {"frame": k, "accepted": True, "quality": 1.0, "rmse": 0.0, "start": "first",
@@ -378,8 +487,11 @@ class ContourModel:
         """Fraction of frame points within ``quality_gate × voxel`` of the model."""
         if not res.ok:
             return 0.0
+        return self._quality_at(src, res.T_target_source, tree)
+
+    def _quality_at(self, src: np.ndarray, T: np.ndarray, tree: cKDTree) -> float:
+        """Fraction of frame points within ``quality_gate × voxel`` of the model at ``T``."""
         assert self._voxel is not None
-        T = res.T_target_source
         d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=self._gate())
         return float(np.mean(np.isfinite(d))) if d.size else 0.0
 
@@ -417,6 +529,128 @@ class ContourModel:
             model = voxel_downsample(merged, self._voxel)
         self._model = model
 
+    def _union(self, exclude: int | None, *, grow: bool = False) -> np.ndarray:
+        """Voxel-downsampled union of the stored frames at their poses, in ``M`` (multiview),
+        without frame ``exclude``; ``grow``: enlarge the voxel until ``max_model_points``."""
+        from relnav.features.keypoints import voxel_downsample
+
+        assert self._voxel is not None
+        parts = [
+            F @ T[:3, :3].T + T[:3, 3]
+            for j, (F, T) in enumerate(zip(self._frames, self._poses, strict=True))
+            if j != exclude
+        ]
+        merged = np.vstack(parts) if parts else np.zeros((0, 3))
+        model = voxel_downsample(merged, self._voxel)
+        while grow and model.shape[0] > self.max_model_points:
+            self._voxel *= math.sqrt(2.0)
+            model = voxel_downsample(merged, self._voxel)
+        return model
+
+    def _refine(self) -> dict[str, Any]:
+        """Multi-view refinement of every frame's pose but frame 0's (which defines ``M``).
+
+        Rounds of leave-one-out registration: frames ``1 … n−2``, then the newest, each
+        re-registered onto the union of all the other frames at their current poses (warm
+        start at its own pose; updated in place, Gauss–Seidel). A registration that fails or
+        whose quality falls below ``reject_fitness`` leaves the pose unchanged. Stops after
+        ``multiview_rounds`` rounds or when no frame's points moved by more than
+        ``multiview_tol`` voxels RMS.
+
+        Returns
+        -------
+        dict
+            ``refine_rounds`` (rounds run) and ``refine_shift`` (largest RMS displacement of a
+            frame's points over the refinement, m), for :attr:`history`.
+        """
+        assert self._voxel is not None
+        n = len(self._poses)
+        self._last_refined = None
+        before = [T.copy() for T in self._poses]
+        rounds = 0
+        for _ in range(self.multiview_rounds):
+            rounds += 1
+            moved = 0.0
+            for j in [*range(1, n - 1), n - 1]:
+                target = self._union(exclude=j)
+                F = self._frames[j]
+                res = self._reg.register(F, target, init=self._poses[j])
+                if not res.ok or self._quality(F, res, cKDTree(target)) < self.reject_fitness:
+                    continue
+                moved = max(moved, _rms_shift(F, self._poses[j], res.T_target_source))
+                self._poses[j] = res.T_target_source
+                if j == n - 1:
+                    self._last_refined = res
+            if moved <= self.multiview_tol * self._voxel:
+                break
+        pairs = zip(self._frames, before, self._poses, strict=True)
+        shift = max((_rms_shift(F, a, b) for F, a, b in pairs), default=0.0)
+        return {"refine_rounds": rounds, "refine_shift": shift}
+
+    def _refine_graph(self, T_seq: np.ndarray, res_seq: RegistrationResult) -> dict[str, Any]:
+        """Multi-view refinement by a pose graph of pairwise frame registrations.
+
+        The newest frame ``k`` is registered (``registration``, warm start at the current
+        relative pose) onto every stored frame ``j`` whose attitude is within
+        ``multiview_max_angle_deg`` of its own; each registration whose quality reaches
+        ``reject_fitness`` is an edge ``Z_jk ≈ T_{S_j,S_k}`` with the inverse of its ICP
+        covariance as information (moved to a right perturbation). The edges of all frames
+        are kept; the graph (frame 0 fixed) is solved by Gauss–Newton (:func:`_solve_pose_graph`)
+        from the current poses. With
+        ``multiview_model_edges`` — and always for a frame without an accepted pairwise edge —
+        the frame → model registration ``T_seq`` is kept as an edge from frame 0 (a prior on
+        ``T_{M,S_k}``, information from its ICP covariance). The observation's ``"icp"``
+        covariance term stays that of the frame → model registration.
+
+        Returns
+        -------
+        dict
+            ``refine_edges`` (edges added for the newest frame), ``refine_shift`` (largest RMS
+            displacement of a frame's points, m) and ``refine_iterations``, for :attr:`history`.
+        """
+        from relnav.geometry.rotations import rotation_angle
+        from relnav.geometry.se3 import adjoint
+
+        assert self._voxel is not None
+        n = len(self._poses)
+        k = n - 1
+        Fk = self._frames[k]
+        added = 0
+        for j in range(k):
+            Z0 = invert(self._poses[j]) @ self._poses[k]
+            if math.degrees(float(rotation_angle(Z0[:3, :3]))) > self.multiview_max_angle_deg:
+                continue
+            Fj = self._frames[j]
+            r = self._reg.register(Fk, Fj, init=Z0)
+            if not r.ok or r.covariance is None or not np.all(np.isfinite(r.covariance)):
+                continue
+            if self._quality(Fk, r, cKDTree(Fj)) < self.reject_fitness:
+                continue
+            Z = r.T_target_source
+            A = adjoint(invert(Z))
+            C = A @ r.covariance @ A.T
+            try:
+                info = np.linalg.inv(0.5 * (C + C.T))
+            except np.linalg.LinAlgError:
+                continue
+            self._edges[(j, k)] = (Z, info)
+            added += 1
+        if added == 0 or self.multiview_model_edges:
+            # the frame → model registration as an edge from frame 0 (= M)
+            C = res_seq.covariance
+            info = (
+                np.linalg.pinv(adjoint(invert(T_seq)) @ C @ adjoint(invert(T_seq)).T)
+                if C is not None and np.all(np.isfinite(C))
+                else np.eye(6) / self._voxel**2
+            )
+            self._priors[k] = (T_seq, info)
+        before = self._poses
+        self._poses, iterations = _solve_pose_graph(self._poses, self._edges, self._priors)
+        self._last_refined = None
+        pairs = zip(self._frames, before, self._poses, strict=True)
+        shift = max((_rms_shift(F, a, b) for F, a, b in pairs), default=0.0)
+        return {"refine_edges": added, "refine_shift": shift, "refine_iterations": iterations}
+
     def _global(self, src: np.ndarray) -> RegistrationResult | None:
         from relnav.fusion.cross_source import CrossSourceRegistration
 
@@ -427,7 +661,7 @@ class ContourModel:
             return None
 
     def _observation_covariance(
-        self, src: np.ndarray, T: np.ndarray, res: RegistrationResult
+        self, src: np.ndarray, T: np.ndarray, res: RegistrationResult, target: np.ndarray
     ) -> np.ndarray | None:
         """``(6, 6)`` covariance of the observation ``[δD, δθ]`` (module docstring)."""
         from scipy.spatial.transform import Rotation
@@ -455,7 +689,7 @@ class ContourModel:
             deltas = []
             for i in range(K):
                 sub = src[labels != i]
-                r = self._reg.register(sub, self._model, init=T)
+                r = self._reg.register(sub, target, init=T)
                 if not r.ok:
                     continue
                 Ti = invert(r.T_target_source)
@@ -475,3 +709,97 @@ class ContourModel:
         pos = T_frame_model[:3, :3] @ self._body_origin + T_frame_model[:3, 3]
         q = matrix_to_quat(T_frame_model[:3, :3])
         return Observation(pos, np.asarray(q, dtype=np.float64), float(quality))
+
+
+def _rms_shift(F: np.ndarray, T_a: np.ndarray, T_b: np.ndarray) -> float:
+    """RMS displacement (m) of the points ``F`` between the poses ``T_a`` and ``T_b``."""
+    if F.shape[0] == 0:
+        return 0.0
+    D = F @ (T_b[:3, :3] - T_a[:3, :3]).T + (T_b[:3, 3] - T_a[:3, 3])
+    return float(np.sqrt(np.mean(np.sum(D * D, axis=1))))
+
+
+def _solve_pose_graph(
+    poses: list[np.ndarray],
+    edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    priors: dict[int, tuple[np.ndarray, np.ndarray]],
+    *,
+    max_iter: int = 20,
+    tolerance: float = 1e-9,
+) -> tuple[list[np.ndarray], int]:
+    """Gauss–Newton on an SE(3) pose graph, node 0 fixed (dense normal equations).
+
+    Parameters
+    ----------
+    poses : list of (4, 4) float64
+        Initial node poses ``X_i``.
+    edges : dict
+        ``(i, j) -> (Z, Ω)``: ``Z ≈ X_i⁻¹ X_j`` with information ``Ω`` (6, 6) of a right
+        perturbation ``X_i⁻¹ X_j = Z exp(ε)``, twists ``[ρ (m), φ (rad)]``.
+    priors : dict
+        ``j -> (T, Ω)``: ``T ≈ X_j``, same conventions.
+    max_iter : int
+        Iterations at most.
+    tolerance : float
+        Stop when the largest update component is below this (m and rad).
+
+    Returns
+    -------
+    poses : list of (4, 4) float64
+        Optimised poses (node 0 unchanged).
+    iterations : int
+        Iterations run.
+
+    Notes
+    -----
+    Residual ``r = log(Z⁻¹ X_i⁻¹ X_j)``, updates ``X ← X exp(δ)``, Jacobians with the
+    first-order inverse right Jacobian ``J_r⁻¹(r) ≈ I + ½ ad(r)`` (as
+    :class:`relnav.navigation.pose_graph.PoseGraph`).
+    """
+    from relnav.geometry.rotations import hat
+    from relnav.geometry.se3 import adjoint, exp_se3, log_se3
+
+    def ad(xi: np.ndarray) -> np.ndarray:
+        A = np.zeros((6, 6))
+        A[:3, :3] = A[3:, 3:] = hat(xi[3:])
+        A[:3, 3:] = hat(xi[:3])
+        return A
+
+    X = [np.array(T, dtype=np.float64) for T in poses]
+    n = len(X)
+    m = 6 * (n - 1)
+    it = 0
+    if m == 0:
+        return X, 0
+    terms = [(i, j, invert(Z), L) for (i, j), (Z, L) in edges.items()]
+    terms += [(-1, j, invert(T), L) for j, (T, L) in priors.items()]
+    while it < max_iter:
+        it += 1
+        H = np.zeros((m, m))
+        g = np.zeros(m)
+        for i, j, Zi, L in terms:
+            Xi = X[i] if i >= 0 else np.eye(4)
+            r = log_se3(Zi @ invert(Xi) @ X[j])
+            Jj = np.eye(6) + 0.5 * ad(r)
+            blocks = [(j, Jj)]
+            if i >= 0:
+                blocks.append((i, -Jj @ adjoint(invert(X[j]) @ Xi)))
+            for a, Ja in blocks:
+                if a == 0:
+                    continue
+                sa = slice(6 * (a - 1), 6 * a)
+                g[sa] += Ja.T @ L @ r
+                for b, Jb in blocks:
+                    if b == 0:
+                        continue
+                    H[sa, 6 * (b - 1) : 6 * b] += Ja.T @ L @ Jb
+        H += np.diag(1e-9 * np.diag(H) + 1e-12)
+        delta = np.linalg.solve(H, -g).reshape(-1, 6)
+        if not np.all(np.isfinite(delta)):
+            log.warning("ContourModel: non-finite pose-graph update, refinement stopped")
+            break
+        for a in range(1, n):
+            X[a] = X[a] @ exp_se3(delta[a - 1])
+        if float(np.max(np.abs(delta))) < tolerance:
+            break
+    return X, it
