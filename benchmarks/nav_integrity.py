@@ -25,9 +25,9 @@ from nav_suite import holdout, simulate_suite, step_errors, suite
 
 
 def main(argv: list[str] | None = None) -> int:
+    from relnav.geometry.lie import log_se3
     from relnav.geometry.se3 import invert
     from relnav.io.sequences import ScanSequence
-    from relnav.navigation.lie import log_se3
     from relnav.odometry import run_sequence
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)

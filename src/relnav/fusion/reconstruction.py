@@ -727,79 +727,26 @@ def _solve_pose_graph(
     max_iter: int = 20,
     tolerance: float = 1e-9,
 ) -> tuple[list[np.ndarray], int]:
-    """Gauss–Newton on an SE(3) pose graph, node 0 fixed (dense normal equations).
+    """Gauss–Newton on the frames' SE(3) pose graph, node 0 fixed
+    (:class:`relnav.geometry.pose_graph.PoseGraph`, no robust edges).
 
-    Parameters
-    ----------
-    poses : list of (4, 4) float64
-        Initial node poses ``X_i``.
-    edges : dict
-        ``(i, j) -> (Z, Ω)``: ``Z ≈ X_i⁻¹ X_j`` with information ``Ω`` (6, 6) of a right
-        perturbation ``X_i⁻¹ X_j = Z exp(ε)``, twists ``[ρ (m), φ (rad)]``.
-    priors : dict
-        ``j -> (T, Ω)``: ``T ≈ X_j``, same conventions.
-    max_iter : int
-        Iterations at most.
-    tolerance : float
-        Stop when the largest update component is below this (m and rad).
-
-    Returns
-    -------
-    poses : list of (4, 4) float64
-        Optimised poses (node 0 unchanged).
-    iterations : int
-        Iterations run.
-
-    Notes
-    -----
-    Residual ``r = log(Z⁻¹ X_i⁻¹ X_j)``, updates ``X ← X exp(δ)``, Jacobians with the
-    first-order inverse right Jacobian ``J_r⁻¹(r) ≈ I + ½ ad(r)`` (as
-    :class:`relnav.navigation.pose_graph.PoseGraph`).
+    ``edges``: ``(i, j) -> (Z, Ω)`` with ``Z ≈ X_i⁻¹ X_j`` and the information ``Ω`` (6, 6) of a
+    right perturbation, twists ``[ρ (m), φ (rad)]``; ``priors``: ``j -> (T, Ω)`` with ``T ≈ X_j``.
+    Returns the optimised poses (node 0 unchanged) and the iterations run; stops when the largest
+    update component is below ``tolerance`` (m and rad).
     """
-    from relnav.geometry.rotations import hat
-    from relnav.geometry.se3 import adjoint, exp_se3, log_se3
+    from relnav.geometry.pose_graph import PoseGraph
 
-    def ad(xi: np.ndarray) -> np.ndarray:
-        A = np.zeros((6, 6))
-        A[:3, :3] = A[3:, 3:] = hat(xi[3:])
-        A[:3, 3:] = hat(xi[:3])
-        return A
-
-    X = [np.array(T, dtype=np.float64) for T in poses]
-    n = len(X)
-    m = 6 * (n - 1)
-    it = 0
-    if m == 0:
-        return X, 0
-    terms = [(i, j, invert(Z), L) for (i, j), (Z, L) in edges.items()]
-    terms += [(-1, j, invert(T), L) for j, (T, L) in priors.items()]
-    while it < max_iter:
-        it += 1
-        H = np.zeros((m, m))
-        g = np.zeros(m)
-        for i, j, Zi, L in terms:
-            Xi = X[i] if i >= 0 else np.eye(4)
-            r = log_se3(Zi @ invert(Xi) @ X[j])
-            Jj = np.eye(6) + 0.5 * ad(r)
-            blocks = [(j, Jj)]
-            if i >= 0:
-                blocks.append((i, -Jj @ adjoint(invert(X[j]) @ Xi)))
-            for a, Ja in blocks:
-                if a == 0:
-                    continue
-                sa = slice(6 * (a - 1), 6 * a)
-                g[sa] += Ja.T @ L @ r
-                for b, Jb in blocks:
-                    if b == 0:
-                        continue
-                    H[sa, 6 * (b - 1) : 6 * b] += Ja.T @ L @ Jb
-        H += np.diag(1e-9 * np.diag(H) + 1e-12)
-        delta = np.linalg.solve(H, -g).reshape(-1, 6)
-        if not np.all(np.isfinite(delta)):
-            log.warning("ContourModel: non-finite pose-graph update, refinement stopped")
-            break
-        for a in range(1, n):
-            X[a] = X[a] @ exp_se3(delta[a - 1])
-        if float(np.max(np.abs(delta))) < tolerance:
-            break
-    return X, it
+    g = PoseGraph()
+    for T in poses:
+        g.add_node(T)
+    for (i, j), (Z, L) in edges.items():
+        g.add_edge(i, j, Z, L)
+    for j, (T, L) in priors.items():
+        g.add_prior(j, T, L)
+    if len(poses) < 2 or not g.edges:
+        return [np.array(T, dtype=np.float64) for T in poses], 0
+    res = g.optimize(
+        fixed=(0,), kernel_start=1.0, kernel=1.0, max_iter=max_iter, tolerance=tolerance
+    )
+    return list(res.poses), res.iterations

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.lie import exp_se3, log_se3
 
 __all__ = ["ConstantVelocityFilter"]
 

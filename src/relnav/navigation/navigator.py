@@ -41,9 +41,9 @@ from typing import Any, Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
+from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
-from relnav.navigation.lie import log_se3
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer

@@ -205,7 +205,7 @@ def pose_noise(steps: Sequence[Any]) -> tuple[float, float]:
     **[interpretation: no ground truth involved; true accelerations count as noise, which is
     conservative]**. Frames the navigator flagged are left out.
     """
-    from relnav.navigation.lie import log_se3
+    from relnav.geometry.lie import log_se3
 
     poses = [s.pose for s in steps]
     ok = [s.status in ("ok", "first") for s in steps]

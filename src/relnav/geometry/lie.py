@@ -1,4 +1,4 @@
-"""SE(3) exponential and logarithm in numba for the navigator's per-frame filter and smoother.
+"""SE(3) exponential and logarithm in numba (navigator filter, smoother and GICP; pose graphs).
 
 Same maps as :func:`relnav.geometry.se3.exp_se3` / :func:`~relnav.geometry.se3.log_se3` (twist
 ``[ρ, φ]``, ``|φ| ≤ π``), without SciPy's ``Rotation`` objects: the filter calls them a few
@@ -14,9 +14,45 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.icp_kernels import _rodrigues_nb
-from relnav.navigation.gicp import _rot_log
 
 __all__ = ["exp_se3", "log_se3"]
+
+
+@njit(cache=True)
+def _rot_log(R: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Rotation vector of ``R`` (``|w| ≤ π``).
+
+    The angle is ``atan2(s, c)`` (accurate near 0 and π, unlike ``acos``); the axis comes from
+    the skew part of ``R`` below 170°, and above from its symmetric part, ``k kᵀ = (S − c I) /
+    (1 − c)`` with ``S = (R + Rᵀ)/2``, signed by the skew part.
+    """
+    w = np.empty(3)
+    w[0] = R[2, 1] - R[1, 2]
+    w[1] = R[0, 2] - R[2, 0]
+    w[2] = R[1, 0] - R[0, 1]
+    s = 0.5 * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    c = min(1.0, max(-1.0, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)))
+    th = math.atan2(s, c)
+    if c > -0.985:  # below ~170°
+        f = 0.5 if s < 1e-15 else 0.5 * th / s
+        for i in range(3):
+            w[i] *= f
+        return w
+    a = 0
+    for i in range(1, 3):
+        if R[i, i] > R[a, a]:
+            a = i
+    k = np.empty(3)
+    ka = math.sqrt(max((R[a, a] - c) / (1.0 - c), 0.0))
+    for i in range(3):
+        k[i] = ka if i == a else 0.5 * (R[a, i] + R[i, a]) / ((1.0 - c) * ka)
+    if k[0] * w[0] + k[1] * w[1] + k[2] * w[2] < 0.0:
+        for i in range(3):
+            k[i] = -k[i]
+    n = math.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+    for i in range(3):
+        w[i] = th * k[i] / n
+    return w
 
 
 @njit(cache=True)
