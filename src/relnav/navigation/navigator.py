@@ -32,18 +32,20 @@ on the navigation suite (``benchmarks/nav_suite.py``), then frozen.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from relnav.errors import ConfigError
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
-from relnav.navigation.lie import log_se3
+from relnav.navigation.lie import exp_se3, log_se3
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
@@ -107,6 +109,27 @@ class NavigatorConfig:
         off, the default): the first step has no motion prior (see
         :meth:`Navigator._bootstrap`). Measured on the suite with 5: better on sim-bennu,
         sim-eoi and orion-inclined-64's wrong steps, worse on iridium-helical-64, so off.
+    init_window : int
+        Multi-view refinement of the first frames (0 = off, the default; else at least 3): once
+        this many frames are tracked, every accepted frame of the window but the first (the
+        anchor) is registered again onto the map of the *other* frames of the window
+        (leave-one-out), in rounds until the poses settle; then the map is rebuilt from the
+        refined poses and the motion filter restarts from the refined last steps (see
+        :meth:`Navigator._refine_window`).
+    init_rounds : int
+        Leave-one-out rounds of the refinement at most.
+    init_gate : float
+        Pair gate of the refinement's registrations, multiples of ``s₀``.
+    init_prior : {"weak", "motion"}
+        Prior of each re-registration: the first frame's weak prior at the frame's current
+        pose, or a constant-velocity prior from its neighbours in the window (the midpoint of
+        the previous and the next frame; the last frame: the previous step repeated) with
+        ``init_prior_scale`` × the white acceleration as its 1σ.
+    init_prior_scale : float
+        Factor on the 1σ of the ``motion`` prior.
+    init_repeat : int
+        Refine once more over the first ``init_repeat`` frames (0 = off; more than
+        ``init_window``).
     smooth_lag : int
         Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
         (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
@@ -263,6 +286,12 @@ class NavigatorConfig:
     adaptive_noise: bool = True
     smooth_lag: int = 20
     bootstrap_frames: int = 0
+    init_window: int = 0
+    init_rounds: int = 5
+    init_gate: float = 3.0
+    init_repeat: int = 0
+    init_prior: Literal["weak", "motion"] = "weak"
+    init_prior_scale: float = 1.0
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -305,6 +334,35 @@ class NavigatorConfig:
     reloc_min_support: int = 6
     reloc_ambiguity: float = 0.3
     reloc_velocity: Literal["keep", "zero", "widen"] = "keep"
+
+
+@dataclass
+class _WindowFrame:
+    """One frame of the multi-view refinement's window (:meth:`Navigator._refine_window`).
+
+    Attributes
+    ----------
+    frame : int
+        Frame index.
+    t : float
+        Time, s.
+    pose : (4, 4) float64
+        ``T_target_sensor`` (tracked, then refined).
+    ok : bool
+        The frame is in the map (the first frame or an ``ok`` step).
+    P, Pm : (N, 3), (M, 3) float64
+        Registration points and the map subset, sensor frame, m (empty when not ``ok``).
+    rng : float
+        Median range of the scan, m.
+    """
+
+    frame: int
+    t: float
+    pose: np.ndarray
+    ok: bool
+    P: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    Pm: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    rng: float = 1.0
 
 
 def _even_subset(P: np.ndarray, budget: int) -> np.ndarray:
@@ -405,6 +463,25 @@ class Navigator:
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
         self.loop_closer: LoopCloser | None = None
         self.relocalizer = Relocalizer(self) if self.config.relocalise else None
+        c = self.config
+        if c.init_window in (1, 2):
+            raise ConfigError(
+                f"method 'relnav': option init_window={c.init_window} must be 0 (off) or at "
+                "least 3 (an anchor and two frames)"
+            )
+        if c.init_repeat and (c.init_window == 0 or c.init_repeat <= c.init_window):
+            raise ConfigError(
+                f"method 'relnav': option init_repeat={c.init_repeat} must be 0 or more than "
+                f"init_window ({c.init_window})"
+            )
+        if c.init_window and c.bootstrap_frames:
+            raise ConfigError(
+                "method 'relnav': options init_window and bootstrap_frames exclude each other"
+            )
+        self._win: list[_WindowFrame] | None = [] if c.init_window > 0 else None
+        self._win_due = sorted({c.init_window, c.init_repeat} - {0})
+        self._prefix: list[np.ndarray] = []
+        self.refinements: list[dict[str, Any]] = []
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -422,6 +499,7 @@ class Navigator:
         if self._boot is not None:
             self._boot.append((P, t, n_raw))
         out = self._track(P, t, n_raw, t_start)
+        self._window_step(P, t, out)
         out = self._observe_loops(P, out)
         if self._boot is not None and len(self._boot) > K and self._rescaled:
             out = self._bootstrap(out)
@@ -569,7 +647,172 @@ class Navigator:
             0,
             time.perf_counter() - t0,
         )
+        t = self.motion.t if self.motion is not None else float(self.n_frames - 1)
+        self._window_step(None, t, out)
         return self._observe_loops(None, out)
+
+    # ------------------------------------------------------------------ multi-view start
+    def _window_step(self, P: np.ndarray | None, t: float, out: OdometryStep) -> None:
+        """Record a tracked frame for the multi-view refinement (``init_window``) and run the
+        refinement when the window is full; its time is added to this frame's."""
+        if self._win is None or self.map is None:
+            return
+        ok = P is not None and out.status in ("ok", "first")
+        f = _WindowFrame(self.n_frames - 1, float(t), self.pose.copy(), ok)
+        if ok:
+            assert P is not None
+            f.P = P
+            f.Pm = _even_subset(P, self.config.max_map_points)
+            f.rng = max(float(np.median(np.linalg.norm(P, axis=1))), 1.0)
+        self._win.append(f)
+        if self.n_frames - self._f0 not in self._win_due:
+            return
+        ts = time.perf_counter()
+        self._refine_window()
+        out.time_s += time.perf_counter() - ts
+        if self.n_frames - self._f0 >= self._win_due[-1]:
+            self._win = None
+
+    def _new_map(self) -> VoxelMap:
+        c, s0 = self.config, self.spacing0
+        return VoxelMap(
+            c.voxel_factor * s0,
+            max_weight=c.max_voxel_weight,
+            max_voxels=c.max_voxels,
+            noise_floor=c.noise_floor * s0,
+            inplane_sigma=c.inplane_sigma * s0,
+            k_neighbors=c.k_neighbors,
+        )
+
+    @staticmethod
+    def _neighbour_prior(
+        used: list[_WindowFrame], i: int, sa: np.ndarray, T: np.ndarray, Lam: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity prior of window frame ``i`` from its neighbours: the midpoint of
+        frames ``i − 1`` and ``i + 1`` (1σ ``sa/√2``, body frame) or, for the last frame, the
+        previous step repeated (1σ ``sa``); ``(T, Lam)`` when the neighbours are not consecutive
+        frames."""
+        f, a = used[i], used[i - 1]
+        if a.frame != f.frame - 1:
+            return T, Lam
+        if i + 1 < len(used) and used[i + 1].frame == f.frame + 1:
+            b = used[i + 1]
+            centre = a.pose @ exp_se3(0.5 * log_se3(invert(a.pose) @ b.pose))
+            S = np.diag(sa**2 / 2.0)
+        elif i >= 2 and used[i - 2].frame == a.frame - 1:
+            centre = a.pose @ invert(used[i - 2].pose) @ a.pose
+            S = np.diag(sa**2)
+        else:
+            return T, Lam
+        return centre, _left_information(centre, S)
+
+    def _refine_window(self) -> None:
+        """Multi-view refinement of the window's poses, leave-one-out (``init_window``).
+
+        **[interpretation]** A step registered onto a map of a few sparse scans, under a motion
+        prior whose velocity is not yet known, is weak in the target's aspect (a rotation about
+        the target against a lateral translation), and the whole map keeps the early frames'
+        error. Here each accepted frame of the window but the first (the anchor, fixed) is
+        registered again onto the union of the *other* frames (several times denser than one
+        scan), from its current pose under the first frame's weak prior (Gauss–Seidel: each
+        new pose is used at once), in rounds until no pose moves by more than a tenth of a
+        voxel (rotation times the scan's range) or ``init_rounds``. A registration with too
+        few pairs or too little overlap keeps its pose. Frames not in the map follow the
+        correction of the last accepted frame before them. Then the map is rebuilt from the
+        refined poses, the filter's pose is the refined one and its velocity the mean of the
+        refined last steps (half of the window's steps, at least two), and the smoother
+        restarts at the last frame: :meth:`finalize` returns the refined poses for the window.
+        """
+        c = self.config
+        assert self._win is not None and self.map is not None and self.motion is not None
+        frames = self._win
+        used = [f for f in frames if f.ok]
+        before = [f.pose.copy() for f in frames]
+        v = self.map.voxel_size
+        gate = float(max(c.init_gate * self.spacing0, 2.0 * v))
+        rounds, moved = 0, float("inf")
+        sa = c.init_prior_scale * np.array(
+            [c.sigma_acc_t * self.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
+        )
+        while rounds < c.init_rounds and moved > 0.1 * v and len(used) > 2:
+            rounds += 1
+            moved = 0.0
+            for i, f in enumerate(used[1:], start=1):
+                T_pr, Lam = f.pose, self._weak_prior(f.pose)
+                if c.init_prior == "motion":
+                    T_pr, Lam = self._neighbour_prior(used, i, sa, T_pr, Lam)
+                m = self._new_map()
+                for g in used:
+                    if g is not f:
+                        m.insert(g.Pm @ g.pose[:3, :3].T + g.pose[:3, 3], g.frame)
+                fit = solve_scan_to_map(
+                    f.P,
+                    m.search_trees,
+                    m.means,
+                    m.information,
+                    np.ascontiguousarray(f.pose),
+                    np.ascontiguousarray(T_pr),
+                    np.ascontiguousarray(Lam),
+                    gate,
+                    float(c.kernel),
+                    int(c.max_iter),
+                    c.tolerance * v,
+                    c.tolerance * v / f.rng,
+                    c0=float(c.kernel_start),
+                    decay=float(c.kernel_decay),
+                )
+                overlap = float(np.count_nonzero(fit.d2 >= 0)) / max(len(f.P), 1)
+                if not (
+                    np.all(np.isfinite(fit.T))
+                    and fit.n_pairs >= c.min_points
+                    and overlap >= c.min_overlap
+                ):
+                    continue
+                D = invert(f.pose) @ fit.T
+                ang = math.acos(float(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+                moved = max(moved, float(np.linalg.norm(D[:3, 3])) + ang * f.rng)
+                f.pose = fit.T.copy()
+        # frames outside the map follow the last accepted frame's correction
+        corr = np.eye(4)
+        for f, T0 in zip(frames, before, strict=True):
+            if f.ok:
+                corr = f.pose @ invert(T0)
+            else:
+                f.pose = corr @ f.pose
+        self.map = self._new_map()
+        for f in used:
+            self.map.insert(f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3], f.frame)
+        steps = [
+            log_se3(invert(a.pose) @ b.pose) / (b.t - a.t)
+            for a, b in itertools.pairwise(used)
+            if b.frame == a.frame + 1 and b.t > a.t
+        ]
+        mot = self.motion
+        mot.pose = frames[-1].pose.copy()
+        if steps:
+            mot.velocity = np.mean(steps[-max(2, len(steps) // 2) :], axis=0)
+        self.pose = mot.pose.copy()
+        self._prefix = [f.pose.copy() for f in frames[:-1]]
+        mot.start_smoothing(c.smooth_lag)
+        if self.relocalizer is not None:
+            self.relocalizer._map_version += 1
+        shift = [
+            math.degrees(
+                math.acos(
+                    float(np.clip((np.trace((invert(T0) @ f.pose)[:3, :3]) - 1) / 2, -1.0, 1.0))
+                )
+            )
+            for f, T0 in zip(frames, before, strict=True)
+        ]
+        self.refinements.append(
+            {"frames": len(frames), "rounds": rounds, "max_rotation_deg": max(shift)}
+        )
+        log.debug(
+            "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
+            len(frames),
+            rounds,
+            max(shift),
+        )
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
         """Record the frame for the pose graph (``loop_closure``): its scan and its step's
@@ -850,11 +1093,14 @@ class Navigator:
         (:meth:`relnav.navigation.pose_graph.LoopCloser.correct`).
         """
         online = list(self._online)
-        if self.motion is None or self.config.smooth_lag <= 0 or not self._rescaled:
+        pre = self._prefix
+        if self.motion is None or not self._rescaled:
             poses = np.stack(online) if online else np.zeros((0, 4, 4))
+        elif self.config.smooth_lag <= 0:
+            poses = np.stack(online[: self._f0] + pre + online[self._f0 + len(pre) :])
         else:
             sm = self.motion.finish_smoothing()
-            poses = np.stack(online[: self._f0] + list(sm))
+            poses = np.stack(online[: self._f0] + pre + list(sm))
             if len(poses) != len(online):  # defensive: never a trajectory of another length
                 log.warning("smoother returned %d poses for %d frames", len(poses), len(online))
                 poses = np.stack(online)
