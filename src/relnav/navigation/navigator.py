@@ -49,7 +49,7 @@ from relnav.navigation.lie import exp_se3, log_se3
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
-from relnav.navigation.voxel_map import VoxelMap
+from relnav.navigation.voxel_map import VoxelMap, plane_information
 from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult
@@ -120,6 +120,11 @@ class NavigatorConfig:
         Leave-one-out rounds of the refinement at most.
     init_gate : float
         Pair gate of the refinement's registrations, multiples of ``s₀``.
+    init_solver : {"loo", "joint"}
+        ``loo``: each frame in turn registered onto the map of the others (rounds of
+        Gauss–Seidel); ``joint``: one Gauss–Newton over all the window's poses per round, with
+        every point paired to its nearest point of another frame and both frames' poses in the
+        residual (:meth:`Navigator._joint_round`).
     init_prior : {"weak", "motion"}
         Prior of each re-registration: the first frame's weak prior at the frame's current
         pose, or a constant-velocity prior from its neighbours in the window (the midpoint of
@@ -290,6 +295,7 @@ class NavigatorConfig:
     init_rounds: int = 5
     init_gate: float = 3.0
     init_repeat: int = 0
+    init_solver: Literal["loo", "joint"] = "loo"
     init_prior: Literal["weak", "motion"] = "weak"
     init_prior_scale: float = 1.0
     min_degeneracy: float = 1e-6
@@ -684,6 +690,121 @@ class Navigator:
             k_neighbors=c.k_neighbors,
         )
 
+    def _joint_round(
+        self, used: list[_WindowFrame], gate: float, kern: float, sa: np.ndarray
+    ) -> float:
+        """One Gauss–Newton step over the poses of ``used`` but the first (the anchor).
+
+        Every map point of every frame (target frame, at the current poses) is paired with its
+        nearest point of *another* frame within ``gate``; the residual ``T_i p − T_j q`` is
+        weighted by the plane information of ``q``'s neighbourhood in the union of the frames
+        (:func:`~relnav.navigation.voxel_map.plane_information`) and a Geman–McClure kernel
+        of scale ``kern``, and both poses are in its Jacobian (left perturbations). With
+        ``init_prior="motion"`` every three consecutive frames add a constant-velocity term
+        (the difference of their two steps, 1σ ``sa``, numerical Jacobians). The first frame's
+        weak prior on each pose keeps the normal equations regular. Returns the largest
+        move, m (rotation times the scan's range).
+        """
+        c, s0 = self.config, self.spacing0
+        n = len(used)
+        Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
+        lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
+        tree = cKDTree(Y)
+        k = min(c.k_neighbors, len(Y))
+        _, nb = tree.query(Y, k=k)
+        Om, _ = plane_information(
+            Y, np.asarray(nb).reshape(len(Y), k), c.inplane_sigma * s0, c.noise_floor * s0
+        )
+        kq = min(len(Y), 2 * n + 8)
+        d, idx = tree.query(Y, k=kq, distance_upper_bound=gate)
+        idx = np.asarray(idx).reshape(len(Y), kq)
+        valid = np.isfinite(np.asarray(d).reshape(len(Y), kq))
+        other = valid & (lab[np.minimum(idx, len(Y) - 1)] != lab[:, None])
+        has = other.any(axis=1)
+        a = np.nonzero(has)[0]
+        b = idx[a, np.argmax(other[a], axis=1)]
+        H = np.zeros((6 * n, 6 * n))
+        g = np.zeros(6 * n)
+        if len(a):
+            r = Y[a] - Y[b]
+            O = Om[b]
+            d2 = np.einsum("ni,nij,nj->n", r, O, r)
+            w = (kern**2 / (kern**2 + d2)) ** 2
+
+            def jac(X: np.ndarray) -> np.ndarray:
+                J = np.zeros((len(X), 3, 6))
+                J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+                J[:, 0, 4], J[:, 0, 5] = X[:, 2], -X[:, 1]
+                J[:, 1, 3], J[:, 1, 5] = -X[:, 2], X[:, 0]
+                J[:, 2, 3], J[:, 2, 4] = X[:, 1], -X[:, 0]
+                return J
+
+            Ja, Jb = jac(Y[a]), -jac(Y[b])
+            WO = w[:, None, None] * O
+            for (J1, l1), (J2, l2) in itertools.product(((Ja, lab[a]), (Jb, lab[b])), repeat=2):
+                blocks = np.einsum("nai,nab,nbj->nij", J1, WO, J2)
+                for i in range(n):
+                    for j in range(n):
+                        sel = (l1 == i) & (l2 == j)
+                        if sel.any():
+                            H[6 * i : 6 * i + 6, 6 * j : 6 * j + 6] += blocks[sel].sum(0)
+            for J1, l1 in ((Ja, lab[a]), (Jb, lab[b])):
+                gi = np.einsum("nai,nab,nb->ni", J1, WO, r)
+                np.add.at(g.reshape(n, 6), l1, gi)
+        if c.init_prior == "motion":
+            self._motion_terms(used, sa, H, g)
+        for i, f in enumerate(used):
+            H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += self._weak_prior(f.pose)
+        try:
+            delta = -np.linalg.solve(H[6:, 6:], g[6:])
+        except np.linalg.LinAlgError:
+            return 0.0
+        if not np.all(np.isfinite(delta)):
+            return 0.0
+        moved = 0.0
+        for i, f in enumerate(used[1:]):
+            dx = delta[6 * i : 6 * i + 6]
+            f.pose = exp_se3(dx) @ f.pose
+            moved = max(moved, float(np.linalg.norm(dx[:3]) + np.linalg.norm(dx[3:]) * f.rng))
+        return moved
+
+    @staticmethod
+    def _motion_terms(
+        used: list[_WindowFrame], sa: np.ndarray, H: np.ndarray, g: np.ndarray
+    ) -> None:
+        """Add the constant-velocity terms of consecutive triples to ``H`` and ``g`` in place:
+        ``e = log(T_a⁻¹ T_b) − log(T_b⁻¹ T_c)`` with information ``diag(1/sa²)``, Jacobians by
+        central differences in the left perturbations of the three poses."""
+        Wm = np.diag(1.0 / sa**2)
+        eps = 1e-6
+
+        def err(Ta: np.ndarray, Tb: np.ndarray, Tc: np.ndarray) -> np.ndarray:
+            return log_se3(invert(Ta) @ Tb) - log_se3(invert(Tb) @ Tc)
+
+        for i in range(len(used) - 2):
+            fa, fb, fc = used[i], used[i + 1], used[i + 2]
+            if fb.frame != fa.frame + 1 or fc.frame != fb.frame + 1:
+                continue
+            T = [fa.pose, fb.pose, fc.pose]
+            e = err(*T)
+            J = np.zeros((6, 18))
+            for m in range(3):
+                for q in range(6):
+                    dq = np.zeros(6)
+                    dq[q] = eps
+                    Tp = list(T)
+                    Tm = list(T)
+                    Tp[m] = exp_se3(dq) @ T[m]
+                    Tm[m] = exp_se3(-dq) @ T[m]
+                    J[:, 6 * m + q] = (err(*Tp) - err(*Tm)) / (2 * eps)
+            ids = [i, i + 1, i + 2]
+            for p_, ip in enumerate(ids):
+                Jp = J[:, 6 * p_ : 6 * p_ + 6]
+                g[6 * ip : 6 * ip + 6] += Jp.T @ Wm @ e
+                for q_, iq in enumerate(ids):
+                    Jq = J[:, 6 * q_ : 6 * q_ + 6]
+                    H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ Wm @ Jq
+
     @staticmethod
     def _neighbour_prior(
         used: list[_WindowFrame], i: int, sa: np.ndarray, T: np.ndarray, Lam: np.ndarray
@@ -734,7 +855,15 @@ class Navigator:
         sa = c.init_prior_scale * np.array(
             [c.sigma_acc_t * self.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
         )
-        while rounds < c.init_rounds and moved > 0.1 * v and len(used) > 2:
+        while c.init_solver == "joint" and rounds < c.init_rounds and len(used) > 2:
+            kern = max(float(c.kernel), float(c.kernel_start) * float(c.kernel_decay) ** rounds)
+            rounds += 1
+            moved = self._joint_round(used, gate, kern, sa)
+            if kern <= c.kernel and moved < 0.1 * v:
+                break
+        while c.init_solver == "loo" and rounds < c.init_rounds and moved > 0.1 * v:
+            if len(used) <= 2:
+                break
             rounds += 1
             moved = 0.0
             for i, f in enumerate(used[1:], start=1):
