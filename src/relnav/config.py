@@ -130,6 +130,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "init_gate": (0, False, None, False),
     "init_repeat": (0, True, None, False),
     "init_prior_scale": (0, False, None, False),
+    "init_inplane_sigma": (0, False, None, False),
     "sigma_acc_t": (0, False, None, False),
     "sigma_acc_r_deg": (0, False, 180, True),
     "sigma_first_t": (0, False, None, False),

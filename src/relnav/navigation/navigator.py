@@ -132,6 +132,11 @@ class NavigatorConfig:
         ``init_prior_scale`` × the white acceleration as its 1σ.
     init_prior_scale : float
         Factor on the 1σ of the ``motion`` prior.
+    init_inplane_sigma : float
+        ``inplane_sigma`` of the joint refinement's plane information, multiples of ``s₀``.
+    init_velocity : {"refined", "keep"}
+        The filter's velocity after the refinement: the mean of the refined last steps, or the
+        one it had.
     init_repeat : int
         Refine once more over the first ``init_repeat`` frames (0 = off; more than
         ``init_window``).
@@ -298,6 +303,8 @@ class NavigatorConfig:
     init_solver: Literal["loo", "joint"] = "loo"
     init_prior: Literal["weak", "motion"] = "weak"
     init_prior_scale: float = 1.0
+    init_inplane_sigma: float = 3.0
+    init_velocity: Literal["refined", "keep"] = "refined"
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -713,7 +720,7 @@ class Navigator:
         k = min(c.k_neighbors, len(Y))
         _, nb = tree.query(Y, k=k)
         Om, _ = plane_information(
-            Y, np.asarray(nb).reshape(len(Y), k), c.inplane_sigma * s0, c.noise_floor * s0
+            Y, np.asarray(nb).reshape(len(Y), k), c.init_inplane_sigma * s0, c.noise_floor * s0
         )
         kq = min(len(Y), 2 * n + 8)
         d, idx = tree.query(Y, k=kq, distance_upper_bound=gate)
@@ -741,13 +748,10 @@ class Navigator:
 
             Ja, Jb = jac(Y[a]), -jac(Y[b])
             WO = w[:, None, None] * O
+            Hb = np.zeros((n, n, 6, 6))
             for (J1, l1), (J2, l2) in itertools.product(((Ja, lab[a]), (Jb, lab[b])), repeat=2):
-                blocks = np.einsum("nai,nab,nbj->nij", J1, WO, J2)
-                for i in range(n):
-                    for j in range(n):
-                        sel = (l1 == i) & (l2 == j)
-                        if sel.any():
-                            H[6 * i : 6 * i + 6, 6 * j : 6 * j + 6] += blocks[sel].sum(0)
+                np.add.at(Hb, (l1, l2), np.einsum("nai,nab,nbj->nij", J1, WO, J2))
+            H += Hb.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
             for J1, l1 in ((Ja, lab[a]), (Jb, lab[b])):
                 gi = np.einsum("nai,nab,nb->ni", J1, WO, r)
                 np.add.at(g.reshape(n, 6), l1, gi)
@@ -846,6 +850,7 @@ class Navigator:
         """
         c = self.config
         assert self._win is not None and self.map is not None and self.motion is not None
+        t_start = time.perf_counter()
         frames = self._win
         used = [f for f in frames if f.ok]
         before = [f.pose.copy() for f in frames]
@@ -918,8 +923,16 @@ class Navigator:
         ]
         mot = self.motion
         mot.pose = frames[-1].pose.copy()
+        chi2_v = float("nan")
         if steps:
-            mot.velocity = np.mean(steps[-max(2, len(steps) // 2) :], axis=0)
+            v_new = np.mean(steps[-max(2, len(steps) // 2) :], axis=0)
+            dv = v_new - mot.velocity
+            try:
+                chi2_v = float(dv @ np.linalg.solve(mot.P[6:, 6:], dv))
+            except np.linalg.LinAlgError:
+                pass
+            if c.init_velocity == "refined":
+                mot.velocity = v_new
         self.pose = mot.pose.copy()
         self._prefix = [f.pose.copy() for f in frames[:-1]]
         mot.start_smoothing(c.smooth_lag)
@@ -934,7 +947,13 @@ class Navigator:
             for f, T0 in zip(frames, before, strict=True)
         ]
         self.refinements.append(
-            {"frames": len(frames), "rounds": rounds, "max_rotation_deg": max(shift)}
+            {
+                "frames": len(frames),
+                "rounds": rounds,
+                "max_rotation_deg": max(shift),
+                "time_s": time.perf_counter() - t_start,
+                "velocity_chi2": chi2_v,
+            }
         )
         log.debug(
             "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
