@@ -115,19 +115,24 @@ class NavigatorConfig:
         anchor) is registered again onto the map of the *other* frames of the window
         (leave-one-out), in rounds until the poses settle; then the map is rebuilt from the
         refined poses and the motion filter restarts from the refined last steps (see
-        :meth:`Navigator._refine_window`). **[measured]** Off by default: on the suite
+        :meth:`Navigator._refine_window`). **[measured]** Off by default. On the suite
         (``benchmarks/nav_suite.py -O init_window=10 -O init_solver=joint -O init_rounds=10 -O
-        init_prior=motion``) the APE falls on 12 of 17 sequences (eros-ellipse-64 0.59 →
-        0.48 m, voyager-ellipse-128 2.07 → 0.37, asteroid-helical-128 0.81 → 0.12,
-        orion-inclined-64 8.09 → 3.74 with 14 → 0 wrong steps, sim-bennu-resample 9.99 →
-        1.05) but rises on envisat-tumble-64 0.81 → 3.41, sim-voyager 0.05 → 0.42, sim-bennu
-        0.82 → 1.30 and aura-ellipse-64 0.40 → 0.51, and the sparsest sequences change
-        chaotically with the window (K = 8: envisat 20.5 m; K = 15: orion 11.5 m). Started at
-        the true poses, the joint refinement of envisat's first 10 frames (41–50 points of a
-        box) drifts 0.5° per frame away from them: those scans' data are biased toward a
-        smaller rotation rate, which the constant-velocity terms cannot see.
+        init_prior=motion``) the APE falls on 10 of 17 sequences (eros-ellipse-64 0.59 →
+        0.44 m, voyager-ellipse-128 2.07 → 1.26, asteroid-helical-128 0.81 → 0.15,
+        sim-bennu-resample 9.99 → 1.19, sim-helical 0.085 → 0.022) and rises on 7
+        (envisat-tumble-64 0.81 → 1.22, aura-ellipse-64 0.40 → 0.64, orion-inclined-64 8.09 →
+        9.97 with 14 → 26 wrong steps, iridium-helical-64 13.5 → 14.9 with 11 → 41, sim-bennu
+        0.82 → 1.13, sim-voyager 0.05 → 0.11); on the sparse sequences the outcome changes
+        with the window and the solver's details (orion 7.6–10.0 m, envisat 0.86–2.6 m,
+        sim-eoi 0.02–2.6 m over K = 8, 10, 15; an undamped Gauss–Newton gave orion 3.7 m
+        and envisat 3.4 m at K = 10). Over 20 noise seeds of envisat-tumble-64 the
+        APE's median rises 1.44 → 3.08 m (worse on 17). Started at the true poses, the joint
+        refinement of envisat's first 10 frames (41–50 points of a box) drifts 0.27° per
+        frame away from them: those scans favour a smaller rotation rate, which the
+        constant-velocity terms cannot see. Cost: one refinement of 0.2–0.7 s on the 64×64
+        sequences, 0.5–1.6 s at 128×128, 3.6 s on sim-eoi (1 500 points per scan).
     init_rounds : int
-        Rounds of the refinement at most (Gauss–Seidel sweeps or Gauss–Newton steps).
+        Rounds of the refinement at most (Gauss–Seidel sweeps or Levenberg–Marquardt steps).
     init_gate : float
         Pair gate of the refinement's registrations, multiples of ``s₀``.
     init_solver : {"loo", "joint"}
