@@ -132,3 +132,20 @@ def test_bad_init_options_are_config_errors(options, needle):
     with pytest.raises(ConfigError, match="method 'relnav'") as e:
         Navigator(**options)
     assert needle in str(e.value)
+
+
+def test_a_refused_refinement_leaves_the_tracked_trajectory(orbit_seq, baseline, monkeypatch):
+    """When the joint refinement is less certain than the filter (``init_check``), nothing
+    changes: poses equal to the run without the option."""
+    monkeypatch.setattr(Navigator, "_joint_is_surer", lambda self, used, gate, sa: False)
+    run = run_sequence(orbit_seq, "relnav", init_window=WINDOW, init_solver="joint")
+    assert np.allclose(run.poses, baseline.poses, atol=1e-9)
+
+
+def test_the_certainty_check_is_recorded(orbit_seq):
+    nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=WINDOW, init_solver="joint")
+    for k in range(WINDOW):
+        nav.register_frame(orbit_seq[k])
+    (rec,) = nav.refinements
+    assert isinstance(rec["accepted"], bool)
+    assert rec["time_s"] > 0

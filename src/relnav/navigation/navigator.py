@@ -117,20 +117,21 @@ class NavigatorConfig:
         refined poses and the motion filter restarts from the refined last steps (see
         :meth:`Navigator._refine_window`). **[measured]** Off by default. On the suite
         (``benchmarks/nav_suite.py -O init_window=10 -O init_solver=joint -O init_rounds=10 -O
-        init_prior=motion``) the APE falls on 10 of 17 sequences (eros-ellipse-64 0.59 →
-        0.44 m, voyager-ellipse-128 2.07 → 1.26, asteroid-helical-128 0.81 → 0.15,
-        sim-bennu-resample 9.99 → 1.19, sim-helical 0.085 → 0.022) and rises on 7
-        (envisat-tumble-64 0.81 → 1.22, aura-ellipse-64 0.40 → 0.64, orion-inclined-64 8.09 →
-        9.97 with 14 → 26 wrong steps, iridium-helical-64 13.5 → 14.9 with 11 → 41, sim-bennu
-        0.82 → 1.13, sim-voyager 0.05 → 0.11); on the sparse sequences the outcome changes
-        with the window and the solver's details (orion 7.6–10.0 m, envisat 0.86–2.6 m,
-        sim-eoi 0.02–2.6 m over K = 8, 10, 15; an undamped Gauss–Newton gave orion 3.7 m
-        and envisat 3.4 m at K = 10). Over 20 noise seeds of envisat-tumble-64 the
-        APE's median rises 1.44 → 3.08 m (worse on 17). Started at the true poses, the joint
-        refinement of envisat's first 10 frames (41–50 points of a box) drifts 0.27° per
-        frame away from them: those scans favour a smaller rotation rate, which the
-        constant-velocity terms cannot see. Cost: one refinement of 0.2–0.7 s on the 64×64
-        sequences, 0.5–1.6 s at 128×128, 3.6 s on sim-eoi (1 500 points per scan).
+        init_prior=motion``, with ``init_check``) the APE falls on 9 of 17 sequences
+        (eros-ellipse-64 0.59 → 0.44 m, voyager-ellipse-128 2.07 → 1.26, asteroid-helical-128
+        0.81 → 0.15, sim-bennu-resample 9.99 → 1.19, sim-helical 0.085 → 0.022), the check
+        refuses the refinement on 5 (envisat-tumble-64, iridium-helical-64, sim-voyager,
+        sim-orion, sim-bennu: unchanged) and it is worse on 3 (aura-ellipse-64 0.40 → 0.64,
+        orion-inclined-64 8.09 → 9.97 with 14 → 26 wrong steps, sim-eoi-resample 0.068 →
+        0.073). The outcome still changes with the window on the sparse sequences (K = 8 /
+        10 / 15: orion 7.6 / 10.0 / 8.5 m, aura 0.52 / 0.64 / 0.80, sim-eoi 0.02 / 0.02 /
+        2.6). Without the check: envisat 0.81 → 1.22 m (median over 20 noise seeds 1.44 →
+        3.08 m, worse on 17; with the check all 20 are refused), iridium 11 → 41 wrong steps.
+        Started at the true poses, the joint refinement of envisat's first 10 frames (41–50
+        points of a box) drifts 0.27° per frame away from them: those scans favour a smaller
+        rotation rate, which constant-velocity terms cannot see. Cost: one refinement of
+        0.2–0.7 s on the 64×64 sequences, 0.5–1.6 s at 128×128, 3.6 s on sim-eoi (1 500
+        points per scan).
     init_rounds : int
         Rounds of the refinement at most (Gauss–Seidel sweeps or Levenberg–Marquardt steps).
     init_gate : float
@@ -156,6 +157,9 @@ class NavigatorConfig:
     init_velocity : {"refined", "keep"}
         The filter's velocity after the refinement: the mean of the refined last steps, or the
         one it had.
+    init_check : bool
+        Keep the ``joint`` refinement only if it is more certain of the window's last pose
+        than the filter (:meth:`Navigator._joint_is_surer`); otherwise the tracked poses stay.
     init_repeat : int
         Refine once more over the first ``init_repeat`` frames (0 = off; more than
         ``init_window``).
@@ -324,6 +328,7 @@ class NavigatorConfig:
     init_prior_scale: float = 1.0
     init_inplane_sigma: float = 3.0
     init_velocity: Literal["refined", "keep"] = "refined"
+    init_check: bool = True
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
     sigma_acc_r_deg: float = 0.2
@@ -764,8 +769,40 @@ class Navigator:
                 break
         return rounds
 
+    def _joint_is_surer(self, used: list[_WindowFrame], gate: float, sa: np.ndarray) -> bool:
+        """Is the joint refinement more certain of the window's last pose than the filter?
+
+        **[interpretation, measured]** The joint problem's covariance of the last frame (the
+        inverse of its normal equations at the final kernel, without the regularising weak
+        prior, body frame) against the filter's own pose covariance: the refinement replaces
+        the tracked poses only if its largest 1σ in translation and in rotation are both at
+        most the filter's. On the suite's first 10 frames the joint's 1σ exceeds the filter's
+        on envisat-tumble-64 (0.62° against 0.39°), sim-bennu, sim-voyager, iridium-helical-64
+        (2.6 m against 1.9 m) and sim-orion, the first four being where the refinement made
+        the APE worse.
+        """
+        H, _, _ = self._joint_system(used, gate, float(self.config.kernel), sa, regular=False)
+        assert self.motion is not None
+        try:
+            C = np.linalg.inv(H[6:, 6:])[-6:, -6:]
+        except np.linalg.LinAlgError:
+            return False
+        Ad = adjoint(invert(used[-1].pose))  # left (target frame) → body
+        C = Ad @ C @ Ad.T
+        P = self.motion.P[:6, :6]
+
+        def big(M: np.ndarray) -> float:
+            return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1])
+
+        return bool(big(C[:3, :3]) <= big(P[:3, :3]) and big(C[3:, 3:]) <= big(P[3:, 3:]))
+
     def _joint_system(
-        self, used: list[_WindowFrame], gate: float, kern: float, sa: np.ndarray
+        self,
+        used: list[_WindowFrame],
+        gate: float,
+        kern: float,
+        sa: np.ndarray,
+        regular: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """Normal equations ``(H, g)`` (6n) and the cost of the window's joint problem at the
         current poses.
@@ -832,7 +869,8 @@ class Navigator:
             assert self.motion is not None
             cost += self._velocity_terms(used, self.motion.velocity, self.motion.P[6:, 6:], H, g)
         for i, f in enumerate(used):
-            H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += self._weak_prior(f.pose)
+            if regular:
+                H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += self._weak_prior(f.pose)
         return H, g, cost
 
     @staticmethod
@@ -973,8 +1011,13 @@ class Navigator:
         sa = c.init_prior_scale * np.array(
             [c.sigma_acc_t * self.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
         )
+        accepted = True
         if c.init_solver == "joint" and len(used) > 2:
             rounds = self._joint_refine(used, gate, sa)
+            if c.init_check and not self._joint_is_surer(used, gate, sa):
+                accepted = False
+                for f, T0 in zip(frames, before, strict=True):
+                    f.pose = T0
         while c.init_solver == "loo" and rounds < c.init_rounds and moved > 0.1 * v:
             if len(used) <= 2:
                 break
@@ -1015,6 +1058,17 @@ class Navigator:
                 ang = math.acos(float(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
                 moved = max(moved, float(np.linalg.norm(D[:3, 3])) + ang * f.rng)
                 f.pose = fit.T.copy()
+        if not accepted:
+            self.refinements.append(
+                {
+                    "frames": len(frames),
+                    "rounds": rounds,
+                    "accepted": False,
+                    "time_s": time.perf_counter() - t_start,
+                }
+            )
+            log.debug("multi-view refinement of %d frames refused", len(frames))
+            return
         # frames outside the map follow the last accepted frame's correction
         corr = np.eye(4)
         for f, T0 in zip(frames, before, strict=True):
@@ -1066,6 +1120,7 @@ class Navigator:
                 "rounds": rounds,
                 "max_rotation_deg": max(shift),
                 "time_s": time.perf_counter() - t_start,
+                "accepted": True,
                 "velocity_chi2": chi2_v,
                 "pose_chi2": chi2_p,
             }
