@@ -78,14 +78,15 @@ def simulate_seeds(out: Path, name: str, seeds: int) -> list[Path]:
     return folders
 
 
-def track(folder: Path):
-    """``relnav`` on one sequence and the relative state from its poses."""
+def track(folder: Path, options: dict[str, str] | None = None):
+    """``relnav`` (with ``options``, strings as on the command line) on one sequence and the
+    relative state from its poses."""
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import relative_state
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(folder)
-    run = run_sequence(seq, "relnav")
+    run = run_sequence(seq, "relnav", **(options or {}))
     return relative_state(run, gt_poses=seq.gt_poses)
 
 
@@ -155,13 +156,17 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
     p.add_argument("--seeds", type=int, default=1, help="Monte Carlo runs per sequence")
+    p.add_argument(
+        "-O", dest="options", action="append", default=[], help="relnav option key=value"
+    )
     a = p.parse_args(argv)
+    opts = dict(kv.split("=", 1) for kv in a.options)
     if a.seeds <= 1:
         for name, folder in simulate_suite(a.out, TUMBLING).items():
-            report_single(name, track(folder))
+            report_single(name, track(folder, opts))
         return 0
     for name in TUMBLING:
-        report_monte_carlo(name, [track(f) for f in simulate_seeds(a.out, name, a.seeds)])
+        report_monte_carlo(name, [track(f, opts) for f in simulate_seeds(a.out, name, a.seeds)])
     return 0
 
 

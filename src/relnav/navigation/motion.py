@@ -160,9 +160,10 @@ class ConstantVelocityFilter:
     # ------------------------------------------------------------------ fixed-lag smoothing
     def start_smoothing(self, lag: int) -> None:
         """Smooth every frame with at least ``lag`` later frames (Rauch–Tung–Striebel on the
-        error state, run over windows of ``2·lag`` frames every ``lag`` frames); ``lag=0``
-        turns smoothing off."""
+        error state, run over windows of ``2·lag`` frames every ``lag`` frames) from the current
+        frame on (a restart forgets what was smoothed before); ``lag=0`` turns smoothing off."""
         self.lag = int(lag)
+        self.smoothed = []
         self._hist = [{"T": self.pose.copy(), "v": self.velocity.copy(), "P": self.P.copy()}]
 
     def _record(self, T_pred: np.ndarray, P_pred: np.ndarray) -> None:

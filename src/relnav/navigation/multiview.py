@@ -1,0 +1,558 @@
+"""Multi-view refinement of the navigator's first frames (``init_window``).
+
+**[interpretation]** On the suite's orbits and on the tumbling target the navigator's error is
+mostly a near-constant rotation of the whole map about the target, set in the first frames:
+each early step is registered onto a map of only a few sparse scans, under a motion prior whose
+velocity is not known yet, and such a step is weak in the target's aspect (a rotation about the
+target against a lateral translation). Once ``init_window`` frames are tracked, their poses
+(the first one fixed: the anchor) are refined from all of them at once, the map is rebuilt from
+the refined poses and the motion filter restarts from the refined last steps
+(:func:`refine_window`). Two solvers:
+
+* ``joint`` (default): Levenberg–Marquardt over all the window's poses; every map point paired
+  with the nearest point of another frame, both poses in the residual, plane information from
+  the union of the frames, constant-velocity terms on consecutive triples
+  (:func:`_joint_system`); kept only if it is more certain of the last pose than the filter
+  (``init_check``, :func:`_joint_is_surer`).
+* ``loo``: each frame in turn registered onto the voxel map of the others (leave-one-out,
+  Gauss–Seidel sweeps) with the navigator's own solver.
+
+**[measured]** (``benchmarks/nav_suite.py --out OUT --methods relnav -O init_window=10``) The
+APE falls on 9 of the 17 suite sequences (eros-ellipse-64 0.59 → 0.44 m, voyager-ellipse-128
+2.07 → 1.26, asteroid-helical-128 0.81 → 0.15, sim-bennu-resample 9.99 → 1.19, sim-helical
+0.085 → 0.022), the check refuses the refinement on 5 (envisat-tumble-64, iridium-helical-64,
+sim-voyager, sim-orion, sim-bennu: unchanged) and it is worse on 3 (aura-ellipse-64 0.40 →
+0.64, orion-inclined-64 8.09 → 9.97 with 14 → 26 wrong steps, sim-eoi-resample 0.068 → 0.073).
+The outcome still changes with the window on the sparse sequences (K = 8 / 10 / 15: orion
+7.6 / 10.0 / 8.5 m, aura 0.52 / 0.64 / 0.80, sim-eoi 0.02 / 0.02 / 2.6). Without the check,
+envisat 0.81 → 1.22 m (median over 20 noise seeds 1.44 → 3.08 m, worse on 17; with the check
+all 20 are refused) and iridium 11 → 41 wrong steps. Started at the true poses, the joint
+refinement of envisat's first 10 frames (41–50 points of a box) drifts 0.27° per frame away
+from them: those scans favour a smaller rotation rate, which constant-velocity terms cannot
+see. The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
+Cost: one refinement of 0.3–0.7 s on the 64×64 sequences, 0.5–1.7 s at 128×128, 3.9 s on
+sim-eoi (1 500 points per scan), all of it in the window's last frame (2–12 ms per frame over
+the suite's 150–250-frame sequences, 20–65 ms over the 60-frame presets).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from relnav.errors import ConfigError
+from relnav.geometry.lie import exp_se3, log_se3
+from relnav.geometry.se3 import adjoint, invert
+from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.voxel_map import plane_information
+
+if TYPE_CHECKING:
+    from relnav.navigation.navigator import Navigator, NavigatorConfig
+    from relnav.odometry.odometry import OdometryStep
+
+__all__ = ["WindowFrame", "check_window_options", "refine_window", "window_step"]
+
+log = logging.getLogger(__name__)
+
+
+def check_window_options(c: NavigatorConfig) -> None:
+    """Raise :class:`~relnav.errors.ConfigError` for inconsistent ``init_*`` options."""
+    if c.init_window in (1, 2):
+        raise ConfigError(
+            f"method 'relnav': option init_window={c.init_window} must be 0 (off) or at "
+            "least 3 (an anchor and two frames)"
+        )
+    if c.init_repeat and (c.init_window == 0 or c.init_repeat <= c.init_window):
+        raise ConfigError(
+            f"method 'relnav': option init_repeat={c.init_repeat} must be 0 or more than "
+            f"init_window ({c.init_window})"
+        )
+    if c.init_window and c.bootstrap_frames:
+        raise ConfigError(
+            "method 'relnav': options init_window and bootstrap_frames exclude each other"
+        )
+
+
+def even_subset(P: np.ndarray, budget: int) -> np.ndarray:
+    """At most ``budget`` points, evenly spaced in scan order (all when there are fewer)."""
+    if len(P) <= budget:
+        return P
+    return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
+
+
+def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
+    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
+    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``)."""
+    Ad = adjoint(T)
+    S = Ad @ S_body @ Ad.T
+    L = np.linalg.pinv(0.5 * (S + S.T))
+    return 0.5 * (L + L.T)
+
+
+@dataclass
+class WindowFrame:
+    """One frame of the multi-view refinement's window (:func:`refine_window`).
+
+    Attributes
+    ----------
+    frame : int
+        Frame index.
+    t : float
+        Time, s.
+    pose : (4, 4) float64
+        ``T_target_sensor`` (tracked, then refined).
+    ok : bool
+        The frame is in the map (the first frame or an ``ok`` step).
+    P, Pm : (N, 3), (M, 3) float64
+        Registration points and the map subset, sensor frame, m (empty when not ``ok``).
+    rng : float
+        Median range of the scan, m.
+    """
+
+    frame: int
+    t: float
+    pose: np.ndarray
+    ok: bool
+    P: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    Pm: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    rng: float = 1.0
+
+
+def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometryStep) -> None:
+    """Record a tracked frame for the multi-view refinement (``init_window``) and run the
+    refinement when the window is full; its time is added to this frame's."""
+    if nav._win is None or nav.map is None:
+        return
+    ok = P is not None and out.status in ("ok", "first")
+    f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
+    if ok:
+        assert P is not None
+        f.P = P
+        f.Pm = even_subset(P, nav.config.max_map_points)
+        f.rng = max(float(np.median(np.linalg.norm(P, axis=1))), 1.0)
+    nav._win.append(f)
+    if nav.n_frames - nav._f0 not in nav._win_due:
+        return
+    ts = time.perf_counter()
+    refine_window(nav)
+    out.time_s += time.perf_counter() - ts
+    if nav.n_frames - nav._f0 >= nav._win_due[-1]:
+        nav._win = None
+
+
+def _joint_refine(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray) -> int:
+    """Levenberg–Marquardt over the poses of ``used`` but the first (the anchor), with the
+    solver's graduated kernel (``kernel_start`` × ``kernel_decay`` per round down to
+    ``kernel``); returns the rounds run.
+
+    A step is kept only if it lowers the joint cost at the same kernel (the pairs found
+    again at the new poses); otherwise the poses are restored and the damping grows ×10
+    (÷3 after a kept step). Stops after ``init_rounds`` rounds, or once at the final kernel
+    no pose moves by more than a tenth of a voxel (rotation times the scan's range) or the
+    damping exceeds 10⁶ (no step lowers the cost).
+    """
+    c = nav.config
+    v = nav.map.voxel_size if nav.map is not None else 1.0
+    lam, rounds = 1e-4, 0
+    kern = max(float(c.kernel), float(c.kernel_start))
+    H, g, cost = _joint_system(nav, used, gate, kern, sa)
+    while rounds < c.init_rounds:
+        k_r = max(float(c.kernel), float(c.kernel_start) * float(c.kernel_decay) ** rounds)
+        rounds += 1
+        if k_r != kern:
+            kern = k_r
+            H, g, cost = _joint_system(nav, used, gate, kern, sa)
+        A = H[6:, 6:] + lam * np.diag(np.diag(H[6:, 6:]))
+        try:
+            delta = -np.linalg.solve(A, g[6:])
+        except np.linalg.LinAlgError:
+            break
+        if not np.all(np.isfinite(delta)):
+            break
+        old = [f.pose for f in used]
+        moved = 0.0
+        for i, f in enumerate(used[1:]):
+            dx = delta[6 * i : 6 * i + 6]
+            f.pose = exp_se3(dx) @ f.pose
+            moved = max(moved, float(np.linalg.norm(dx[:3]) + np.linalg.norm(dx[3:]) * f.rng))
+        H2, g2, cost2 = _joint_system(nav, used, gate, kern, sa)
+        if cost2 < cost:
+            H, g, cost = H2, g2, cost2
+            lam = max(lam / 3.0, 1e-7)
+        else:
+            for f, T in zip(used, old, strict=True):
+                f.pose = T
+            lam *= 10.0
+            moved = float("inf")
+        if kern <= c.kernel and (moved < 0.1 * v or lam > 1e6):
+            break
+    return rounds
+
+
+def _joint_is_surer(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray) -> bool:
+    """Is the joint refinement more certain of the window's last pose than the filter?
+
+    **[interpretation, measured]** The joint problem's covariance of the last frame (the
+    inverse of its normal equations at the final kernel, without the regularising weak
+    prior, body frame) against the filter's own pose covariance: the refinement replaces
+    the tracked poses only if its largest 1σ in translation and in rotation are both at
+    most the filter's. On the suite's first 10 frames the joint's 1σ exceeds the filter's
+    on envisat-tumble-64 (0.62° against 0.39°), sim-bennu, sim-voyager, iridium-helical-64
+    (2.6 m against 1.9 m) and sim-orion, the first four being where the refinement made
+    the APE worse.
+    """
+    H, _, _ = _joint_system(nav, used, gate, float(nav.config.kernel), sa, regular=False)
+    assert nav.motion is not None
+    try:
+        C = np.linalg.inv(H[6:, 6:])[-6:, -6:]
+    except np.linalg.LinAlgError:
+        return False
+    Ad = adjoint(invert(used[-1].pose))  # left (target frame) → body
+    C = Ad @ C @ Ad.T
+    P = nav.motion.P[:6, :6]
+
+    def big(M: np.ndarray) -> float:
+        return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1])
+
+    return bool(big(C[:3, :3]) <= big(P[:3, :3]) and big(C[3:, 3:]) <= big(P[3:, 3:]))
+
+
+def _joint_system(
+    nav: Navigator,
+    used: list[WindowFrame],
+    gate: float,
+    kern: float,
+    sa: np.ndarray,
+    regular: bool = True,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Normal equations ``(H, g)`` (6n) and the cost of the window's joint problem at the
+    current poses.
+
+    Every map point of every frame (target frame, at the current poses) is paired with its
+    nearest point of *another* frame within ``gate``; the residual ``T_i p − T_j q`` is
+    weighted by the plane information of ``q``'s neighbourhood in the union of the frames
+    (:func:`~relnav.navigation.voxel_map.plane_information`) and a Geman–McClure kernel
+    of scale ``kern`` (cost ``ρ(d²) = k² d² / (k² + d²)``; an unpaired point costs ``k²``),
+    and both poses are in its Jacobian (left perturbations). With ``init_prior`` ``motion``
+    or ``velocity`` the constant-velocity terms are added (:func:`_motion_terms`,
+    :func:`_velocity_terms`). The first frame's weak prior on each pose keeps ``H``
+    regular (not in the cost).
+    """
+    c, s0 = nav.config, nav.spacing0
+    n = len(used)
+    Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
+    lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
+    tree = cKDTree(Y)
+    k = min(c.k_neighbors, len(Y))
+    _, nb = tree.query(Y, k=k)
+    Om, _ = plane_information(
+        Y, np.asarray(nb).reshape(len(Y), k), c.init_inplane_sigma * s0, c.noise_floor * s0
+    )
+    kq = min(len(Y), 2 * n + 8)
+    d, idx = tree.query(Y, k=kq, distance_upper_bound=gate)
+    idx = np.asarray(idx).reshape(len(Y), kq)
+    valid = np.isfinite(np.asarray(d).reshape(len(Y), kq))
+    other = valid & (lab[np.minimum(idx, len(Y) - 1)] != lab[:, None])
+    has = other.any(axis=1)
+    a = np.nonzero(has)[0]
+    b = idx[a, np.argmax(other[a], axis=1)]
+    H = np.zeros((6 * n, 6 * n))
+    g = np.zeros(6 * n)
+    k2 = kern**2
+    cost = k2 * float(len(Y) - len(a))
+    if len(a):
+        r = Y[a] - Y[b]
+        O = Om[b]
+        d2 = np.einsum("ni,nij,nj->n", r, O, r)
+        cost += float(np.sum(k2 * d2 / (k2 + d2)))
+        w = (k2 / (k2 + d2)) ** 2
+
+        def jac(X: np.ndarray) -> np.ndarray:
+            J = np.zeros((len(X), 3, 6))
+            J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+            J[:, 0, 4], J[:, 0, 5] = X[:, 2], -X[:, 1]
+            J[:, 1, 3], J[:, 1, 5] = -X[:, 2], X[:, 0]
+            J[:, 2, 3], J[:, 2, 4] = X[:, 1], -X[:, 0]
+            return J
+
+        Ja, Jb = jac(Y[a]), -jac(Y[b])
+        WO = w[:, None, None] * O
+        Hb = np.zeros((n, n, 6, 6))
+        for (J1, l1), (J2, l2) in itertools.product(((Ja, lab[a]), (Jb, lab[b])), repeat=2):
+            np.add.at(Hb, (l1, l2), np.einsum("nai,nab,nbj->nij", J1, WO, J2))
+        H += Hb.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
+        for J1, l1 in ((Ja, lab[a]), (Jb, lab[b])):
+            gi = np.einsum("nai,nab,nb->ni", J1, WO, r)
+            np.add.at(g.reshape(n, 6), l1, gi)
+    if c.init_prior in ("motion", "velocity"):
+        cost += _motion_terms(used, sa, H, g)
+    if c.init_prior == "velocity":
+        assert nav.motion is not None
+        cost += _velocity_terms(used, nav.motion.velocity, nav.motion.P[6:, 6:], H, g)
+    for i, f in enumerate(used):
+        if regular:
+            H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += nav._weak_prior(f.pose)
+    return H, g, cost
+
+
+def _motion_terms(used: list[WindowFrame], sa: np.ndarray, H: np.ndarray, g: np.ndarray) -> float:
+    """Add the constant-velocity terms of consecutive triples to ``H`` and ``g`` in place:
+    ``e = log(T_a⁻¹ T_b) − log(T_b⁻¹ T_c)`` with information ``diag(1/sa²)``, Jacobians by
+    central differences in the left perturbations of the three poses; returns their
+    cost ``Σ eᵀ W e``."""
+    Wm = np.diag(1.0 / sa**2)
+    eps = 1e-6
+    cost = 0.0
+
+    def err(Ta: np.ndarray, Tb: np.ndarray, Tc: np.ndarray) -> np.ndarray:
+        return log_se3(invert(Ta) @ Tb) - log_se3(invert(Tb) @ Tc)
+
+    for i in range(len(used) - 2):
+        fa, fb, fc = used[i], used[i + 1], used[i + 2]
+        if fb.frame != fa.frame + 1 or fc.frame != fb.frame + 1:
+            continue
+        T = [fa.pose, fb.pose, fc.pose]
+        e = err(*T)
+        cost += float(e @ Wm @ e)
+        J = np.zeros((6, 18))
+        for m in range(3):
+            for q in range(6):
+                dq = np.zeros(6)
+                dq[q] = eps
+                Tp = list(T)
+                Tm = list(T)
+                Tp[m] = exp_se3(dq) @ T[m]
+                Tm[m] = exp_se3(-dq) @ T[m]
+                J[:, 6 * m + q] = (err(*Tp) - err(*Tm)) / (2 * eps)
+        ids = [i, i + 1, i + 2]
+        for p_, ip in enumerate(ids):
+            Jp = J[:, 6 * p_ : 6 * p_ + 6]
+            g[6 * ip : 6 * ip + 6] += Jp.T @ Wm @ e
+            for q_, iq in enumerate(ids):
+                Jq = J[:, 6 * q_ : 6 * q_ + 6]
+                H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ Wm @ Jq
+    return cost
+
+
+def _velocity_terms(
+    used: list[WindowFrame], v: np.ndarray, P_vv: np.ndarray, H: np.ndarray, g: np.ndarray
+) -> float:
+    """Add a prior on each step of consecutive frames, ``e = log(T_a⁻¹ T_b) − v Δt`` with
+    information ``(P_vv Δt² · m)⁻¹`` (``m`` steps: together they weigh as one velocity
+    measurement), to ``H`` and ``g`` in place; Jacobians by central differences. Returns
+    their cost ``Σ eᵀ W e``."""
+    pairs = [
+        (i, i + 1)
+        for i in range(len(used) - 1)
+        if used[i + 1].frame == used[i].frame + 1 and used[i + 1].t > used[i].t
+    ]
+    if not pairs:
+        return 0.0
+    eps = 1e-6
+    cost = 0.0
+    for i, j in pairs:
+        fa, fb = used[i], used[j]
+        dt = fb.t - fa.t
+        try:
+            W = np.linalg.inv(P_vv * dt**2 * len(pairs))
+        except np.linalg.LinAlgError:
+            return cost
+        T = [fa.pose, fb.pose]
+        e = log_se3(invert(T[0]) @ T[1]) - v * dt
+        cost += float(e @ W @ e)
+        J = np.zeros((6, 12))
+        for m in range(2):
+            for q in range(6):
+                dq = np.zeros(6)
+                dq[q] = eps
+                Tp, Tm = list(T), list(T)
+                Tp[m] = exp_se3(dq) @ T[m]
+                Tm[m] = exp_se3(-dq) @ T[m]
+                ep = log_se3(invert(Tp[0]) @ Tp[1])
+                em = log_se3(invert(Tm[0]) @ Tm[1])
+                J[:, 6 * m + q] = (ep - em) / (2 * eps)
+        for p_, ip in enumerate((i, j)):
+            Jp = J[:, 6 * p_ : 6 * p_ + 6]
+            g[6 * ip : 6 * ip + 6] += Jp.T @ W @ e
+            for q_, iq in enumerate((i, j)):
+                Jq = J[:, 6 * q_ : 6 * q_ + 6]
+                H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ W @ Jq
+    return cost
+
+
+def _neighbour_prior(
+    used: list[WindowFrame], i: int, sa: np.ndarray, T: np.ndarray, Lam: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-velocity prior of window frame ``i`` from its neighbours: the midpoint of
+    frames ``i − 1`` and ``i + 1`` (1σ ``sa/√2``, body frame) or, for the last frame, the
+    previous step repeated (1σ ``sa``); ``(T, Lam)`` when the neighbours are not consecutive
+    frames."""
+    f, a = used[i], used[i - 1]
+    if a.frame != f.frame - 1:
+        return T, Lam
+    if i + 1 < len(used) and used[i + 1].frame == f.frame + 1:
+        b = used[i + 1]
+        centre = a.pose @ exp_se3(0.5 * log_se3(invert(a.pose) @ b.pose))
+        S = np.diag(sa**2 / 2.0)
+    elif i >= 2 and used[i - 2].frame == a.frame - 1:
+        centre = a.pose @ invert(used[i - 2].pose) @ a.pose
+        S = np.diag(sa**2)
+    else:
+        return T, Lam
+    return centre, left_information(centre, S)
+
+
+def refine_window(nav: Navigator) -> None:
+    """Multi-view refinement of the window's poses, leave-one-out (``init_window``).
+
+    **[interpretation]** A step registered onto a map of a few sparse scans, under a motion
+    prior whose velocity is not yet known, is weak in the target's aspect (a rotation about
+    the target against a lateral translation), and the whole map keeps the early frames'
+    error. Here each accepted frame of the window but the first (the anchor, fixed) is
+    registered again onto the union of the *other* frames (several times denser than one
+    scan), from its current pose under the first frame's weak prior (Gauss–Seidel: each
+    new pose is used at once), in rounds until no pose moves by more than a tenth of a
+    voxel (rotation times the scan's range) or ``init_rounds``. A registration with too
+    few pairs or too little overlap keeps its pose. Frames not in the map follow the
+    correction of the last accepted frame before them. Then the map is rebuilt from the
+    refined poses, the filter's pose is the refined one and its velocity the mean of the
+    refined last steps (half of the window's steps, at least two), and the smoother
+    restarts at the last frame: :meth:`Navigator.finalize` returns the refined poses for the window.
+    """
+    c = nav.config
+    assert nav._win is not None and nav.map is not None and nav.motion is not None
+    t_start = time.perf_counter()
+    frames = nav._win
+    used = [f for f in frames if f.ok]
+    before = [f.pose.copy() for f in frames]
+    v = nav.map.voxel_size
+    gate = float(max(c.init_gate * nav.spacing0, 2.0 * v))
+    rounds, moved = 0, float("inf")
+    sa = c.init_prior_scale * np.array(
+        [c.sigma_acc_t * nav.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
+    )
+    accepted = True
+    if c.init_solver == "joint" and len(used) > 2:
+        rounds = _joint_refine(nav, used, gate, sa)
+        if c.init_check and not _joint_is_surer(nav, used, gate, sa):
+            accepted = False
+            for f, T0 in zip(frames, before, strict=True):
+                f.pose = T0
+    while c.init_solver == "loo" and rounds < c.init_rounds and moved > 0.1 * v:
+        if len(used) <= 2:
+            break
+        rounds += 1
+        moved = 0.0
+        for i, f in enumerate(used[1:], start=1):
+            T_pr, Lam = f.pose, nav._weak_prior(f.pose)
+            if c.init_prior == "motion":
+                T_pr, Lam = _neighbour_prior(used, i, sa, T_pr, Lam)
+            m = nav._new_map()
+            for g in used:
+                if g is not f:
+                    m.insert(g.Pm @ g.pose[:3, :3].T + g.pose[:3, 3], g.frame)
+            fit = solve_scan_to_map(
+                f.P,
+                m.search_trees,
+                m.means,
+                m.information,
+                np.ascontiguousarray(f.pose),
+                np.ascontiguousarray(T_pr),
+                np.ascontiguousarray(Lam),
+                gate,
+                float(c.kernel),
+                int(c.max_iter),
+                c.tolerance * v,
+                c.tolerance * v / f.rng,
+                c0=float(c.kernel_start),
+                decay=float(c.kernel_decay),
+            )
+            overlap = float(np.count_nonzero(fit.d2 >= 0)) / max(len(f.P), 1)
+            if not (
+                np.all(np.isfinite(fit.T))
+                and fit.n_pairs >= c.min_points
+                and overlap >= c.min_overlap
+            ):
+                continue
+            D = invert(f.pose) @ fit.T
+            ang = math.acos(float(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+            moved = max(moved, float(np.linalg.norm(D[:3, 3])) + ang * f.rng)
+            f.pose = fit.T.copy()
+    if not accepted:
+        nav.refinements.append(
+            {
+                "frames": len(frames),
+                "rounds": rounds,
+                "accepted": False,
+                "time_s": time.perf_counter() - t_start,
+            }
+        )
+        log.debug("multi-view refinement of %d frames refused", len(frames))
+        return
+    # frames outside the map follow the last accepted frame's correction
+    corr = np.eye(4)
+    for f, T0 in zip(frames, before, strict=True):
+        if f.ok:
+            corr = f.pose @ invert(T0)
+        else:
+            f.pose = corr @ f.pose
+    nav.map = nav._new_map()
+    for f in used:
+        nav.map.insert(f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3], f.frame)
+    steps = [
+        log_se3(invert(a.pose) @ b.pose) / (b.t - a.t)
+        for a, b in itertools.pairwise(used)
+        if b.frame == a.frame + 1 and b.t > a.t
+    ]
+    mot = nav.motion
+    xi_last = log_se3(invert(before[-1]) @ frames[-1].pose)
+    try:
+        chi2_p = float(xi_last @ np.linalg.solve(mot.P[:6, :6], xi_last))
+    except np.linalg.LinAlgError:
+        chi2_p = float("nan")
+    mot.pose = frames[-1].pose.copy()
+    chi2_v = float("nan")
+    if steps:
+        v_new = np.mean(steps[-max(2, len(steps) // 2) :], axis=0)
+        dv = v_new - mot.velocity
+        try:
+            chi2_v = float(dv @ np.linalg.solve(mot.P[6:, 6:], dv))
+        except np.linalg.LinAlgError:
+            pass
+        if c.init_velocity == "refined":
+            mot.velocity = v_new
+    nav.pose = mot.pose.copy()
+    nav._prefix = [f.pose.copy() for f in frames[:-1]]
+    mot.start_smoothing(c.smooth_lag)
+    if nav.relocalizer is not None:
+        nav.relocalizer._map_version += 1
+    shift = [
+        math.degrees(
+            math.acos(float(np.clip((np.trace((invert(T0) @ f.pose)[:3, :3]) - 1) / 2, -1.0, 1.0)))
+        )
+        for f, T0 in zip(frames, before, strict=True)
+    ]
+    nav.refinements.append(
+        {
+            "frames": len(frames),
+            "rounds": rounds,
+            "max_rotation_deg": max(shift),
+            "time_s": time.perf_counter() - t_start,
+            "accepted": True,
+            "velocity_chi2": chi2_v,
+            "pose_chi2": chi2_p,
+        }
+    )
+    log.debug(
+        "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
+        len(frames),
+        rounds,
+        max(shift),
+    )
