@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from nav_scenarios import flash_orbit
 from relnav.errors import ConfigError
 from relnav.geometry.se3 import invert
 from relnav.navigation import Navigator
@@ -22,26 +23,7 @@ WINDOW = 8
 def orbit_seq(tmp_path_factory):
     """16 frames of a 64×64 flash LIDAR (2 cm noise) on an ellipse around an asteroid at ~50 m."""
     out = tmp_path_factory.mktemp("nav-init") / "seq"
-    sc = {
-        "name": "nav-init-test",
-        "seed": 3,
-        "frames": 250,
-        "max_frames": FRAMES,
-        "dt": 55.5,
-        "format": "npy",
-        "target": {"name": "asteroid", "scale_to": 14.0},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
-        "trajectory": {
-            "kind": "elliptic-orbit",
-            "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},
-        },
-    }
+    sc = flash_orbit("nav-init-test", max_frames=FRAMES)
     simulate(sc, out)
     from relnav.io.sequences import ScanSequence
 

@@ -41,6 +41,7 @@ import itertools
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -302,13 +303,42 @@ def _joint_system(
     return H, g, cost
 
 
+def _add_pose_term(
+    err: Callable[..., np.ndarray],
+    poses: list[np.ndarray],
+    ids: list[int],
+    W: np.ndarray,
+    H: np.ndarray,
+    g: np.ndarray,
+) -> float:
+    """Add one term ``eᵀ W e`` with ``e = err(*poses)`` of the window frames ``ids`` to ``H`` and
+    ``g`` in place, its Jacobians by central differences in the poses' left perturbations;
+    returns the term's cost."""
+    eps = 1e-6
+    e = err(*poses)
+    J = np.zeros((6, 6 * len(poses)))
+    for m in range(len(poses)):
+        for q in range(6):
+            dq = np.zeros(6)
+            dq[q] = eps
+            Tp, Tm = list(poses), list(poses)
+            Tp[m] = exp_se3(dq) @ poses[m]
+            Tm[m] = exp_se3(-dq) @ poses[m]
+            J[:, 6 * m + q] = (err(*Tp) - err(*Tm)) / (2 * eps)
+    for p_, ip in enumerate(ids):
+        Jp = J[:, 6 * p_ : 6 * p_ + 6]
+        g[6 * ip : 6 * ip + 6] += Jp.T @ W @ e
+        for q_, iq in enumerate(ids):
+            H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ W @ J[:, 6 * q_ : 6 * q_ + 6]
+    return float(e @ W @ e)
+
+
 def _motion_terms(used: list[WindowFrame], sa: np.ndarray, H: np.ndarray, g: np.ndarray) -> float:
     """Add the constant-velocity terms of consecutive triples to ``H`` and ``g`` in place:
     ``e = log(T_a⁻¹ T_b) − log(T_b⁻¹ T_c)`` with information ``diag(1/sa²)``, Jacobians by
     central differences in the left perturbations of the three poses; returns their
     cost ``Σ eᵀ W e``."""
     Wm = np.diag(1.0 / sa**2)
-    eps = 1e-6
     cost = 0.0
 
     def err(Ta: np.ndarray, Tb: np.ndarray, Tc: np.ndarray) -> np.ndarray:
@@ -318,26 +348,7 @@ def _motion_terms(used: list[WindowFrame], sa: np.ndarray, H: np.ndarray, g: np.
         fa, fb, fc = used[i], used[i + 1], used[i + 2]
         if fb.frame != fa.frame + 1 or fc.frame != fb.frame + 1:
             continue
-        T = [fa.pose, fb.pose, fc.pose]
-        e = err(*T)
-        cost += float(e @ Wm @ e)
-        J = np.zeros((6, 18))
-        for m in range(3):
-            for q in range(6):
-                dq = np.zeros(6)
-                dq[q] = eps
-                Tp = list(T)
-                Tm = list(T)
-                Tp[m] = exp_se3(dq) @ T[m]
-                Tm[m] = exp_se3(-dq) @ T[m]
-                J[:, 6 * m + q] = (err(*Tp) - err(*Tm)) / (2 * eps)
-        ids = [i, i + 1, i + 2]
-        for p_, ip in enumerate(ids):
-            Jp = J[:, 6 * p_ : 6 * p_ + 6]
-            g[6 * ip : 6 * ip + 6] += Jp.T @ Wm @ e
-            for q_, iq in enumerate(ids):
-                Jq = J[:, 6 * q_ : 6 * q_ + 6]
-                H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ Wm @ Jq
+        cost += _add_pose_term(err, [fa.pose, fb.pose, fc.pose], [i, i + 1, i + 2], Wm, H, g)
     return cost
 
 
@@ -355,7 +366,6 @@ def _velocity_terms(
     ]
     if not pairs:
         return 0.0
-    eps = 1e-6
     cost = 0.0
     for i, j in pairs:
         fa, fb = used[i], used[j]
@@ -364,26 +374,11 @@ def _velocity_terms(
             W = np.linalg.inv(P_vv * dt**2 * len(pairs))
         except np.linalg.LinAlgError:
             return cost
-        T = [fa.pose, fb.pose]
-        e = log_se3(invert(T[0]) @ T[1]) - v * dt
-        cost += float(e @ W @ e)
-        J = np.zeros((6, 12))
-        for m in range(2):
-            for q in range(6):
-                dq = np.zeros(6)
-                dq[q] = eps
-                Tp, Tm = list(T), list(T)
-                Tp[m] = exp_se3(dq) @ T[m]
-                Tm[m] = exp_se3(-dq) @ T[m]
-                ep = log_se3(invert(Tp[0]) @ Tp[1])
-                em = log_se3(invert(Tm[0]) @ Tm[1])
-                J[:, 6 * m + q] = (ep - em) / (2 * eps)
-        for p_, ip in enumerate((i, j)):
-            Jp = J[:, 6 * p_ : 6 * p_ + 6]
-            g[6 * ip : 6 * ip + 6] += Jp.T @ W @ e
-            for q_, iq in enumerate((i, j)):
-                Jq = J[:, 6 * q_ : 6 * q_ + 6]
-                H[6 * ip : 6 * ip + 6, 6 * iq : 6 * iq + 6] += Jp.T @ W @ Jq
+
+        def err(Ta: np.ndarray, Tb: np.ndarray, _dt: float = dt) -> np.ndarray:
+            return log_se3(invert(Ta) @ Tb) - v * _dt
+
+        cost += _add_pose_term(err, [fa.pose, fb.pose], [i, j], W, H, g)
     return cost
 
 
