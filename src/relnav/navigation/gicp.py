@@ -31,8 +31,9 @@ from numba import njit
 from relnav.geometry.icp_kernels import _rodrigues_nb
 from relnav.geometry.kdtree import _kd_query
 from relnav.geometry.lie import _rot_log
+from relnav.geometry.se3 import adjoint
 
-__all__ = ["ScanToMapFit", "solve_scan_to_map"]
+__all__ = ["ScanToMapFit", "left_information", "solve_scan_to_map"]
 
 
 @njit(cache=True)
@@ -299,3 +300,12 @@ class ScanToMapFit:
     swd: float
     d2: np.ndarray
     idx: np.ndarray
+
+
+def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
+    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
+    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``)."""
+    Ad = adjoint(T)
+    S = Ad @ S_body @ Ad.T
+    L = np.linalg.pinv(0.5 * (S + S.T))
+    return 0.5 * (L + L.T)

@@ -51,8 +51,8 @@ from scipy.spatial import cKDTree
 from relnav.errors import ConfigError
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.gicp import solve_scan_to_map
-from relnav.navigation.voxel_map import plane_information
+from relnav.navigation.gicp import left_information, solve_scan_to_map
+from relnav.navigation.voxel_map import even_subset, plane_information
 
 if TYPE_CHECKING:
     from relnav.navigation.navigator import Navigator, NavigatorConfig
@@ -79,22 +79,6 @@ def check_window_options(c: NavigatorConfig) -> None:
         raise ConfigError(
             "method 'relnav': options init_window and bootstrap_frames exclude each other"
         )
-
-
-def even_subset(P: np.ndarray, budget: int) -> np.ndarray:
-    """At most ``budget`` points, evenly spaced in scan order (all when there are fewer)."""
-    if len(P) <= budget:
-        return P
-    return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
-
-
-def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
-    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
-    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``)."""
-    Ad = adjoint(T)
-    S = Ad @ S_body @ Ad.T
-    L = np.linalg.pinv(0.5 * (S + S.T))
-    return 0.5 * (L + L.T)
 
 
 @dataclass

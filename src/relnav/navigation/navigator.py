@@ -44,11 +44,11 @@ from scipy.spatial import cKDTree
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
-from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.gicp import left_information, solve_scan_to_map
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
-from relnav.navigation.voxel_map import VoxelMap
+from relnav.navigation.voxel_map import VoxelMap, even_subset
 from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
 from relnav.registration.result import RegistrationResult
@@ -525,7 +525,7 @@ class Navigator:
                 self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
             ts = time.perf_counter()
-            Pm = mv.even_subset(P, self.config.max_map_points)
+            Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             timings["map"] = time.perf_counter() - ts
         else:
@@ -643,7 +643,7 @@ class Navigator:
                 fallback_sigma=self._first_sigma,
             )
         cov = out.result.info.get("step_covariance") if out.result is not None else None
-        Pm = None if P is None else mv.even_subset(P, c.max_map_points)
+        Pm = None if P is None else even_subset(P, c.max_map_points)
         P_pose = self.motion.P[:6, :6] if self.motion is not None else None
         self.loop_closer.observe(self.n_frames - 1, out.status, Pm, cov, P_pose)
         out.time_s += time.perf_counter() - ts
@@ -667,7 +667,7 @@ class Navigator:
             )
         self.spacing0 = _spacing(P)
         self.map = self._new_map()
-        Pm = mv.even_subset(P, c.max_map_points)
+        Pm = even_subset(P, c.max_map_points)
         self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
         st0 = c.sigma_first_t * max(_rms_radius(P), self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
@@ -712,7 +712,7 @@ class Navigator:
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(_rms_radius(P), self.spacing0)
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
-        Lam = mv.left_information(T_pred, P_pp)
+        Lam = left_information(T_pred, P_pp)
         v = self.map.voxel_size
         motion = 3.0 * (float(np.linalg.norm(sigma[:3])) + float(np.linalg.norm(sigma[3:])) * rng)
         gate = float(max(motion, 2.0 * v))
@@ -797,7 +797,7 @@ class Navigator:
     def _weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
         """Information (left, target frame) of the first frame's weak motion prior."""
         st, sr = self._first_sigma
-        return mv.left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
+        return left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
 
     def _solve(
         self,

@@ -31,7 +31,7 @@ from relnav.geometry.kdtree import _kd_build
 
 log = logging.getLogger(__name__)
 
-__all__ = ["VoxelMap", "plane_information"]
+__all__ = ["VoxelMap", "even_subset", "plane_information"]
 
 
 @njit(cache=True)
@@ -393,3 +393,10 @@ class VoxelMap:
         self._touched = set()
         self._mean = mu
         self._dirty = False
+
+
+def even_subset(P: np.ndarray, budget: int) -> np.ndarray:
+    """At most ``budget`` points, evenly spaced in scan order (all when there are fewer)."""
+    if len(P) <= budget:
+        return P
+    return P[np.linspace(0, len(P) - 1, budget).astype(np.int64)]
