@@ -31,24 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from nav_suite import holdout, suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
-BLOCKS = ("position", "velocity", "attitude", "omega")
-
-
-def block_nees(res, k0: int) -> np.ndarray:
-    """NEES per step from ``k0`` of the four 3-dim blocks and of the whole 12-dim state,
-    ``(K - k0, 5)`` (NaN where an error is not finite)."""
-    e = res.errors()
-    err = np.concatenate([e[b] for b in BLOCKS], axis=1)
-    out = np.full((len(err) - k0, 5), np.nan)
-    for i, k in enumerate(range(k0, len(err))):
-        if not np.all(np.isfinite(err[k])):
-            continue
-        C = res.covariance[k][:12, :12]
-        for b in range(4):
-            s = slice(3 * b, 3 * b + 3)
-            out[i, b] = err[k, s] @ np.linalg.solve(C[s, s], err[k, s])
-        out[i, 4] = err[k] @ np.linalg.solve(C, err[k])
-    return out
+BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
 
 
 def rate_nees(res, k0: int) -> np.ndarray:
@@ -126,7 +109,8 @@ def report_monte_carlo(name: str, results: list) -> None:
 
     n = len(results)
     k0 = round(0.3 * len(results[0]))
-    B = np.stack([block_nees(r, k0) for r in results])  # (n, K, 5)
+    # (n, K, 5): the four 3-dim blocks and the whole 12-dim state, from step k0
+    B = np.stack([np.column_stack([r.nees_blocks(), r.nees()])[k0:] for r in results])
     w = np.concatenate(
         [np.degrees(np.linalg.norm(r.errors()["omega"][k0:], axis=1)) for r in results]
     )

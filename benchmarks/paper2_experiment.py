@@ -131,20 +131,6 @@ def _truth_for(res: TrackResult, T_s_target: np.ndarray) -> TrackTruth:
     return TrackTruth.from_poses(res.time, T)
 
 
-def _block_nees(res: TrackResult) -> np.ndarray:
-    """NEES per step of the four 3-blocks (position, velocity, attitude, ω) ``(K, 4)``."""
-    e = res.errors()
-    err = np.concatenate([e["position"], e["velocity"], e["attitude"], e["omega"]], axis=1)
-    out = np.full((len(res), 4), np.nan)
-    for k in range(len(res)):
-        if not (np.all(np.isfinite(err[k])) and np.all(np.isfinite(res.covariance[k]))):
-            continue
-        for b in range(4):
-            s = slice(3 * b, 3 * b + 3)
-            out[k, b] = err[k, s] @ np.linalg.solve(res.covariance[k][s, s], err[k, s])
-    return out
-
-
 def _pack(res: TrackResult) -> dict[str, np.ndarray]:
     e = res.errors()
     sig = res.sigma()
@@ -156,7 +142,7 @@ def _pack(res: TrackResult) -> dict[str, np.ndarray]:
         time=res.time,
         nis=np.where(upd, res.nis, np.nan),
         nees=np.where(est, res.nees(), np.nan),
-        nees_blocks=np.where(est[:, None], _block_nees(res), np.nan),
+        nees_blocks=np.where(est[:, None], res.nees_blocks(), np.nan),
         noise_scale=np.asarray(res.noise_scale, dtype=float),
         position=res.position,
         velocity=res.velocity,

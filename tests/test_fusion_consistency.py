@@ -248,3 +248,22 @@ def test_first_rotation_alignment_takes_axes_from_the_first_frame() -> None:
     assert not np.allclose(Am[:3, :3], A[:3, :3], atol=1e-6)
     with pytest.raises(ConfigError):
         _align_truth(T_gt, est[:, :3, 3], q, "median")
+
+
+def test_nees_blocks_are_the_blocks_of_the_full_nees() -> None:
+    """Each block's NEES uses its own covariance block: with the cross-covariances zeroed the
+    four blocks add up to the full NEES; steps without an estimate are NaN in both."""
+    t, obs, truth = simulate_observations(12, 4.5, seed=2)
+    res = Tracker("ukf", omega0=OMEGA0, q=RIGID_Q).run(t, obs, truth=truth)
+    blocks = res.nees_blocks()
+    assert blocks.shape == (len(res), 4)
+    for k in range(len(res)):
+        C = res.covariance[k].copy()
+        mask = np.kron(np.eye(4), np.ones((3, 3))) == 0
+        C[mask] = 0.0
+        res.covariance[k] = C
+    full = res.nees()
+    est = np.isfinite(full)
+    assert est.sum() >= 10
+    np.testing.assert_allclose(blocks[est].sum(axis=1), full[est], rtol=1e-9)
+    assert np.all(np.isnan(blocks[~est]))

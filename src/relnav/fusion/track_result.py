@@ -214,6 +214,20 @@ class TrackResult:
                 out[k] = float(err[k] @ np.linalg.solve(self.covariance[k], err[k]))
         return out
 
+    def nees_blocks(self) -> np.ndarray:
+        """NEES per step of the four 3-dim blocks (position, velocity, attitude, ω), each
+        against its own covariance block, ``(K, 4)`` (NaN without an estimate)."""
+        e = self.errors()
+        err = np.concatenate([e["position"], e["velocity"], e["attitude"], e["omega"]], axis=1)
+        out = np.full((len(self), 4), np.nan)
+        for k in range(len(self)):
+            if not (np.all(np.isfinite(err[k])) and np.all(np.isfinite(self.covariance[k]))):
+                continue
+            for b in range(4):
+                s = slice(3 * b, 3 * b + 3)
+                out[k, b] = err[k, s] @ np.linalg.solve(self.covariance[k][s, s], err[k, s])
+        return out
+
     def consistency(self, probability: float = 0.95) -> dict[str, Any]:
         """Mean NIS over the updates and mean NEES over the estimated steps (after the
         initializing one), each with the two-sided ``probability`` band of the mean of that
