@@ -66,10 +66,12 @@ from scipy.spatial import cKDTree
 from relnav.features import compute as compute_descriptors
 from relnav.features import get_descriptor, voxel_downsample
 from relnav.geometry.normals import estimate_normals
+from relnav.geometry.rotations import rotvec_to_matrix
 from relnav.geometry.se3 import kabsch
 from relnav.matching.correspondences import Correspondences
 from relnav.matching.gcc import consistency_bitset, geometric_consistency_grouping
 from relnav.matching.nn import match_descriptors
+from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
 if TYPE_CHECKING:
@@ -344,17 +346,10 @@ def candidate_poses(
     return out
 
 
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix of ``angle`` (rad) about the unit ``axis`` (Rodrigues)."""
-    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
-
-
 def _distance(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
     """Translation (m) and rotation (deg) between two poses."""
-    c = np.clip((np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
-    return float(np.linalg.norm(A[:3, 3] - B[:3, 3])), math.degrees(math.acos(c))
+    angle, dist = step_difference(A, B)
+    return dist, math.degrees(angle)
 
 
 def _members_of(sub: Correspondences, chosen: Correspondences) -> np.ndarray:
@@ -504,7 +499,7 @@ class Relocalizer:
             pivots += [(cen, axis) for axis in Vt]
         for cen, axis in pivots:
             for k in (1, 2, 3):
-                R = _axis_rotation(axis, 0.5 * math.pi * k)
+                R = rotvec_to_matrix(0.5 * math.pi * k * axis / np.linalg.norm(axis))
                 G = np.eye(4)
                 G[:3, :3] = R
                 G[:3, 3] = cen - R @ cen
