@@ -19,7 +19,8 @@ The observations (with the observer's covariance) are recorded once per seed by 
 variant's run through ``track_sequence`` (its prediction seeds the contour model's
 registration) and every variant — the main one included — is then run by ``Tracker.run`` on
 the same recorded observations, so the variants differ only in the filter. Truth is expressed
-in each variant's body frame by the tracker's ``gt_alignment="mean"`` convention.
+in each variant's body frame: axes from the first observation, origin by the mean offset, or the
+rotation centre for the variants that estimate it (``gt_alignment="centre"``).
 
 Run: ``python benchmarks/paper2_experiment.py --out docs/results/paper2 [--seeds 20]``
 (about 50 s per seed on one core; ``--work DIR`` keeps the simulated sequences and the recorded
@@ -54,8 +55,11 @@ from relnav.io.sequences import ScanSequence
 
 OMEGA0 = np.radians([0.0, 0.0, 5.0])  # Paper 2 Table 3
 # truth in the observer's body frame: its axes are by definition the camera axes at the first
-# observation (exact), its origin the mean offset (see relnav.fusion.tracker.track_sequence)
+# observation (exact); its origin the mean offset, or for a filter that estimates the rotation
+# centre (centre_offset) the target's rotation centre moved along the spin axis only (see
+# relnav.fusion.tracker.track_sequence, gt_alignment)
 ALIGN = "first-rotation"
+ALIGN_CENTRE = "centre"
 MAIN = "ukf+offset+bias+jackknife"
 VARIANTS: dict[str, tuple[str, dict[str, Any], bool]] = {
     # name: (filter, tracker options, use the observer's covariance and drift)
@@ -127,7 +131,8 @@ class _Recorder:
 
 
 def _truth_for(res: TrackResult, T_s_target: np.ndarray) -> TrackTruth:
-    T, _ = _align_truth(T_s_target, res.position, res.quat, ALIGN)
+    how = ALIGN_CENTRE if res.settings.get("centre_offset") else ALIGN
+    T, _ = _align_truth(T_s_target, res.position, res.quat, how)
     return TrackTruth.from_poses(res.time, T)
 
 
@@ -184,22 +189,36 @@ def observe_seed(
     return {"time": main.time, "obs": obs, "R": R, "quality": quality, "T_s_target": T_s_target}
 
 
+def recorded_observations(
+    rec: dict[str, np.ndarray], use_R: bool = True, r_scale: float = 1.0, drift_scale: float = 1.0
+) -> list[Observation | None]:
+    """One seed's recorded observations for :meth:`Tracker.run` (``None`` where none). With
+    ``use_R`` each carries the observer's covariance × ``r_scale`` and, as the drift of the
+    observer bias, the previous observation's covariance × ``drift_scale``."""
+    obs: list[Observation | None] = []
+    prev_R = None  # the drift of frame k = covariance of the previous observation
+    for k in range(len(rec["time"])):
+        if not np.all(np.isfinite(rec["obs"][k])):
+            obs.append(None)
+            continue
+        Rk = rec["R"][k] if use_R and np.all(np.isfinite(rec["R"][k])) else None
+        o = Observation(
+            rec["obs"][k, :3],
+            rec["obs"][k, 3:],
+            rec["quality"][k],
+            R=None if Rk is None else Rk * r_scale,
+            drift=None if prev_R is None else prev_R * drift_scale,
+        )
+        prev_R = Rk
+        obs.append(o)
+    return obs
+
+
 def run_variants(rec: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
     """Every filter variant on one seed's recorded observations."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for name, (filt, vopts, use_R) in VARIANTS.items():
-        obs: list[Observation | None] = []
-        prev_R = None  # the drift of frame k = covariance of the previous observation
-        for k in range(len(rec["time"])):
-            if not np.all(np.isfinite(rec["obs"][k])):
-                obs.append(None)
-                continue
-            Rk = rec["R"][k] if use_R and np.all(np.isfinite(rec["R"][k])) else None
-            o = Observation(
-                rec["obs"][k, :3], rec["obs"][k, 3:], rec["quality"][k], R=Rk, drift=prev_R
-            )
-            prev_R = Rk
-            obs.append(o)
+        obs = recorded_observations(rec, use_R)
         res = Tracker(filt, **{"omega0": OMEGA0, **vopts}).run(rec["time"], obs)
         res.truth = _truth_for(res, rec["T_s_target"])
         out[name] = _pack(res)
@@ -312,7 +331,8 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         "",
         f"`python benchmarks/paper2_experiment.py --out {meta['out']} --seeds {meta['seeds']}` — "
         f"li-rotating at {meta['distance']} m, {meta['frames']} frames at 4.5 s (5°/s about z, "
-        f"0.22 Hz), seeds 0–{meta['seeds'] - 1}, ω₀ = (0, 0, 5)°/s; errors after the first "
+        f"0.22 Hz), seeds {meta['first_seed']}–{meta['first_seed'] + meta['seeds'] - 1}, "
+        "ω₀ = (0, 0, 5)°/s; errors after the first "
         f"{meta['skip']} steps. Cost: {meta['record_seconds']:.0f} s to simulate and observe all "
         f"seeds (when recorded; one process on a shared 2-core machine), {meta['seconds']:.0f} s "
         "for this run"
@@ -513,6 +533,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds first … first + seeds − 1")
     ap.add_argument("--frames", type=int, default=16)
     ap.add_argument("--distance", type=float, default=3.0)
     ap.add_argument("--skip", type=int, default=3, help="steps ignored in the error statistics")
@@ -545,7 +566,7 @@ def main() -> None:
     t0 = time.perf_counter()
     runs = []
     recs = []
-    for seed in range(args.seeds):
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         tag = "_".join(p.replace("=", "-") for p in sorted(args.sim_param))
         mtag = "_".join(o.replace("=", "-") for o in sorted(args.model_option))
         cache = work / (
@@ -580,6 +601,7 @@ def main() -> None:
     meta = {
         "out": str(args.out),
         "seeds": args.seeds,
+        "first_seed": args.first_seed,
         "frames": args.frames,
         "distance": args.distance,
         "skip": args.skip,

@@ -250,6 +250,36 @@ def test_first_rotation_alignment_takes_axes_from_the_first_frame() -> None:
         _align_truth(T_gt, est[:, :3, 3], q, "median")
 
 
+def test_centre_alignment_compares_a_centre_estimate_with_the_rotation_centre() -> None:
+    """A target spinning about z through its origin. An estimated centre that is right up to an
+    offset along the axis (unobservable) is exact under ``"centre"``; one that is off the axis
+    by a body-fixed 4 cm (it circles the true centre) keeps that error under ``"centre"``,
+    while the mean offset (``"first-rotation"``) aligns it away and makes the truth circle."""
+    from scipy.spatial.transform import Rotation
+
+    from relnav.fusion.tracker import _align_truth
+
+    K = 16
+    ang = np.radians(22.5) * np.arange(K)
+    T_gt = np.tile(np.eye(4), (K, 1, 1))
+    T_gt[:, :3, :3] = Rotation.from_rotvec(np.outer(ang, [0.0, 0.0, 1.0])).as_matrix()
+    T_gt[:, :3, 3] = [3.0, -0.1, 0.0]
+    q = Rotation.from_matrix(T_gt[:, :3, :3]).as_quat()
+    on_axis = T_gt[:, :3, 3] + [0.0, 0.0, 0.07]
+    T_c, A_c = _align_truth(T_gt, on_axis, q, "centre")
+    np.testing.assert_allclose(A_c[:3, 3], [0.0, 0.0, 0.07], atol=1e-12)
+    np.testing.assert_allclose(T_c[:, :3, 3], on_axis, atol=1e-12)
+    off_axis = T_gt[:, :3, 3] + T_gt[:, :3, :3] @ np.array([0.04, 0.0, 0.07])
+    T_c, _ = _align_truth(T_gt, off_axis, q, "centre")
+    np.testing.assert_allclose(np.linalg.norm(off_axis - T_c[:, :3, 3], axis=1), 0.04, atol=1e-12)
+    T_m, _ = _align_truth(T_gt, off_axis, q, "first-rotation")
+    np.testing.assert_allclose(T_m[:, :3, 3], off_axis, atol=1e-12)
+    # a target that does not turn has no axis: the mean offset is kept
+    T_still = np.tile(np.eye(4), (K, 1, 1))
+    _, A_s = _align_truth(T_still, on_axis, np.tile([0.0, 0.0, 0.0, 1.0], (K, 1)), "centre")
+    np.testing.assert_allclose(A_s[:3, 3], on_axis.mean(axis=0), atol=1e-12)
+
+
 def test_nees_blocks_are_the_blocks_of_the_full_nees() -> None:
     """Each block's NEES uses its own covariance block: with the cross-covariances zeroed the
     four blocks add up to the full NEES; steps without an estimate are NaN in both."""

@@ -155,9 +155,10 @@ def track(
     ),
     max_frames: int = typer.Option(None, "--max-frames", help="Use the first N frames."),
     gt_alignment: str = typer.Option(
-        "mean",
+        "auto",
         "--gt-alignment",
-        help="Truth in the estimate's body frame: mean | first | first-rotation | none.",
+        help="Truth in the estimate's body frame: auto | mean | first | first-rotation | "
+        "centre | none (auto: centre for a filter estimating the rotation centre, else mean).",
     ),
     seed: int = typer.Option(0, "--seed", help="Observer seed."),
     option: list[str] = typer.Option(
@@ -264,7 +265,7 @@ def track(
                 method=f"{result.filter}:{result.meta.get('observer')}",
                 options={
                     "filter_options": opts,
-                    "gt_alignment": gt_alignment,
+                    "gt_alignment": result.meta.get("gt_alignment", gt_alignment),
                     "second_sensor": second_sensor,
                     "max_frames": max_frames,
                 },

@@ -16,11 +16,14 @@ the observer. The estimate is ``T_s_b`` (position ``d`` = origin of ``b`` in ``s
 of the target (Paper 2's contour model, or the registration chain here) define ``b`` as the
 model frame fixed to the target at the first observed frame, so ``b`` differs from the
 simulator's mesh frame by a constant transform. Ground truth (sequence folders):
-``T_s_target = inv(T_target_s)`` per frame; ``gt_alignment="mean"`` (default) right-multiplies
-it by the constant ``T_target_b`` that best matches the estimate (rotation: chordal mean of
+``T_s_target = inv(T_target_s)`` per frame; ``gt_alignment="mean"`` right-multiplies it by the
+constant ``T_target_b`` that best matches the estimate (rotation: chordal mean of
 ``R_gt⁻¹ R_est``; translation: mean of ``R_gtᵀ (d_est − d_gt)``), ``"first"`` takes it from the
-first estimated frame, ``"none"`` compares the mesh frame directly. Truth velocity and body
-rates come from finite differences of the aligned truth.
+first estimated frame, ``"none"`` compares the mesh frame directly. A filter that estimates the
+rotation centre (``centre_offset``) is compared with the rotation centre: ``"centre"`` keeps
+only the axial part of that mean translation (the default ``"auto"`` picks it for such a
+filter, ``"mean"`` otherwise). Truth velocity and body rates come from finite differences of
+the aligned truth.
 
 Euler angles are extrinsic ``xyz`` (roll about x, pitch about y, yaw about z; ``R = Rz Ry Rx``)
 of ``R_s_b``, unwrapped over time (a spinning target's yaw keeps growing). Attitude errors are
@@ -421,11 +424,32 @@ def _align_truth(
     elif how == "first-rotation":
         A[:3, :3] = project_to_so3(rel_R[0])
         A[:3, 3] = rel_t.mean(axis=0)
+    elif how == "centre":
+        A[:3, :3] = project_to_so3(rel_R[0])
+        u = _spin_axis(T_gt[:, :3, :3])
+        m = rel_t.mean(axis=0)
+        A[:3, 3] = m if u is None else u * float(u @ m)
     else:
         raise ConfigError(
-            "gt_alignment must be 'mean', 'first', 'first-rotation' or 'none', got " + repr(how)
+            "gt_alignment must be 'auto', 'mean', 'first', 'first-rotation', 'centre' or "
+            "'none', got " + repr(how)
         )
     return T_gt @ A, A
+
+
+def _spin_axis(R_gt: np.ndarray) -> np.ndarray | None:
+    """Unit spin axis ``(3,)`` of truth attitudes ``R_s_target`` ``(K, 3, 3)`` in target axes:
+    the principal direction of the frame-to-frame rotation vectors ``log(R_kᵀ R_k+1)``
+    (``None`` when the target does not turn)."""
+    from scipy.spatial.transform import Rotation
+
+    if len(R_gt) < 2:
+        return None
+    inc = Rotation.from_matrix(np.swapaxes(R_gt[:-1], 1, 2) @ R_gt[1:]).as_rotvec()
+    inc = inc[np.all(np.isfinite(inc), axis=1)]
+    if len(inc) == 0 or float(np.max(np.linalg.norm(inc, axis=1))) < 1e-9:
+        return None
+    return np.linalg.eigh(inc.T @ inc)[1][:, -1]
 
 
 def _associate(t_primary: np.ndarray, t_other: np.ndarray) -> np.ndarray:
@@ -460,7 +484,7 @@ def track_sequence(
     second_sensor: str | None = "auto",
     max_frames: int | None = None,
     require_all_sensors: bool = True,
-    gt_alignment: Literal["mean", "first", "first-rotation", "none"] = "mean",
+    gt_alignment: Literal["auto", "mean", "first", "first-rotation", "centre", "none"] = "auto",
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
     **tracker_options: Any,
@@ -483,12 +507,17 @@ def track_sequence(
     require_all_sensors : bool
         A frame where any used sensor has no scan (no scan within half a frame period, or an
         empty scan) gets no observation (predicted through, ``"flagged: missing scan"``).
-    gt_alignment : {"mean", "first", "first-rotation", "none"}
+    gt_alignment : {"auto", "mean", "first", "first-rotation", "centre", "none"}
         How truth is expressed in the estimate's body frame (module docstring).
         ``"first-rotation"``: rotation from the first estimated frame (exact for the contour
         and registration observers, whose body axes are by definition the sensor axes at
         their first observation and which initialize the filter there), translation the mean
-        offset.
+        offset. ``"centre"``: the same rotation; the truth point is the target's rotation
+        centre (its frame origin) moved along the spin axis only, by the mean offset's axial
+        component — the point a ``centre_offset`` filter estimates (its position along the
+        axis is unobservable), so that an error of the estimated centre across the axis is
+        counted, not aligned away. ``"auto"`` (default): ``"centre"`` when the filter
+        estimates a centre offset, else ``"mean"``.
     seed : int
         Seed of the observer's random choices (recorded in ``meta``).
     progress : callable, optional
@@ -598,6 +627,9 @@ def track_sequence(
         "gt_alignment": gt_alignment,
         "observer_stats": dict(getattr(obs_impl, "stats", {}) or {}),
     }
+    if gt_alignment == "auto":
+        gt_alignment = "centre" if getattr(f, "centre_offset", False) else "mean"
+        meta["gt_alignment"] = gt_alignment
     if gt is not None:
         T_s_target = invert(gt[:n])
         T_aligned, A = _align_truth(T_s_target, rec.pos, rec.quat, gt_alignment)
