@@ -366,7 +366,9 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         "Pooled mean over all updates (NIS, 6 dof) and all estimated steps (NEES, 12 dof) of all "
         "seeds, with the 95 % band of such a mean; 'steps in band' = fraction of time steps whose "
         "seed-averaged value lies in the 95 % band for the average of "
-        f"{meta['seeds']} runs. NEES blocks = mean 3-dof NEES of position, velocity, attitude, ω.",
+        f"{meta['seeds']} runs. NEES blocks = mean 3-dof NEES of position, velocity, attitude, ω. "
+        "Truth of the variants with a centre offset: the target's rotation centre "
+        "(``gt_alignment='centre'``; the others: the observer's reference point).",
         "",
         "| variant | mean NIS [band] | NIS steps in band | mean NEES [band] | NEES steps in band "
         "| NEES blocks p/v/att/ω | median λ |",

@@ -62,7 +62,7 @@ the loop about the spin axis (spin-attitude RMS 1.4 → 0.47°) and lowers the p
 10 / 2.3 → 7.5 / 8.1 / 1.0 mm; y bias −5.4 → −0.06 mm, x bias unchanged at −5.7 mm), but the
 tilt gets worse (0.31 / 0.6 → 0.45 / 0.85°): **[interpretation]** pairwise edges between partial
 views constrain it less than one registration onto the whole model. The tracker's NEES goes
-61.7 → 32.9 and its NIS 14 → 9.8, both still outside their bands; the jackknife σ is still
+49.7 → 21.8 and its NIS 14 → 9.8, both still outside their bands; the jackknife σ is still
 ≈ 3.5× too small. Leave-one-out rounds do not converge: more rounds give larger errors. Same
 cost per sequence (≈ 19 s against 22 s for 16 frames). Off by default.
 
