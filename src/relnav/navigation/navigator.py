@@ -46,10 +46,11 @@ from scipy.spatial import cKDTree
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
-from relnav.navigation.gicp import ScanToMapFit, left_information, solve_scan_to_map
+from relnav.navigation.gicp import left_information, normal_information, solve_scan_to_map
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
+from relnav.navigation.repeated import RepeatedPoints
 from relnav.navigation.voxel_map import VoxelMap, even_subset
 from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
@@ -94,6 +95,8 @@ class NavigatorConfig:
         does not. RPE translation, random vs even (first 10 frames of the ``dense-*`` presets;
         first 80 of sim-eoi, seed 0): Kinect 221k points 7.3 vs 40.7 mm, flash at 30k 8.7 vs
         18.4 mm, at 121k 13.0 vs 9.8 mm (worse), sim-eoi (3 200 points) 10.0 vs 10.9 mm.
+        4000 (all of sim-eoi's points): APE sim-eoi 0.032 → 0.008 m, sim-eoi-resample 0.068 →
+        0.032 m, 80–93 ms per frame instead of 29–31; other suite sequences unchanged.
     max_map_points : int
         Point budget of the map update (an evenly spaced subset of the registered points).
     min_overlap : float
@@ -216,34 +219,24 @@ class NavigatorConfig:
     information : {"full", "normal"}
         The scan's information passed to the filter, the degeneracy test and the covariances:
         the solver's own (``full``, default: the map patches' normals and their weak in-plane
-        pull), or from the normals only (``normal``, see :func:`_normal_information`). Measured
-        on the suite (APE m, wrong steps; full → normal): orion-inclined-64 8.09/14 → 4.40/5,
-        aura-ellipse-64 0.40 → 0.58, envisat-tumble-64 0.81 → 1.04, iridium-helical-64
-        13.5/11 → 28.9/42 (12–30 points per scan: the filter then trusts the weak prior
-        less than the in-plane pull), others equal — so ``full`` stays the default.
+        pull), or from the normals only (``normal``,
+        :func:`~relnav.navigation.gicp.normal_information`). Measured on the suite (APE m,
+        wrong steps; full → normal): orion-inclined-64 8.09/14 → 4.40/5, aura-ellipse-64
+        0.40 → 0.58, envisat-tumble-64 0.81 → 1.04, iridium-helical-64 13.5/11 → 28.9/42
+        (12–30 points per scan: the filter then trusts the weak prior less than the in-plane
+        pull), others equal — so ``full`` stays the default.
     inplane_sigma : float
         1σ of a map patch along its own plane, multiples of ``s₀`` (weak: point-to-plane).
     k_neighbors : int
         Map points per patch (normal estimation).
     repeat_refine : float
-        Repeated surface points (0 = off): 1σ, multiples of ``s₀``, of a point-to-point
-        refinement of each registration (:meth:`Navigator._refine_repeated`), kept when at
-        least ``repeat_fraction`` of the scan lies on the previous scan's rays
-        (:meth:`Navigator._repeat_evidence`) and the sensor does not fire the same rays every
-        frame (:meth:`Navigator._same_rays`). **[measured]** On paper 1's presets with its
-        data generation (one model cloud: every scan samples the same surface points) the
-        weak in-plane pull of point-to-plane lets the pose slide along the surface, worst on
-        the first step (sim-bennu: 0.72 m off, then kept by the map); point to point is
-        nearly exact there. Suite APE (m), off → on: sim-eoi 0.053 → 0.032, sim-helical
-        0.085 → 0.030, sim-voyager 0.048 → 0.036, sim-orion 0.542 → 0.076, sim-bennu
-        0.817 → 0.141; the other 12 sequences unchanged (flash: same rays, never tried;
-        ``-resample``: evidence 0.01–0.08, never kept; repeated: 0.63–1.0). Cost: a second
-        solve per frame where the rays do not repeat (retested every 10th frame after 3
-        misses). Without the ray test the flash sequences were lost (eros-ellipse-64 APE
-        58 m: slow motion makes their points nearly repeat). 0.1 was the only value tried.
+        Repeated surface points (0 = off): 1σ (× ``s₀``) of a point-to-point refinement of
+        each registration, kept when the scan repeats the previous scan's surface points
+        (:mod:`relnav.navigation.repeated`, with the suite's figures: sim-orion APE 0.54 →
+        0.08 m, sim-bennu 0.82 → 0.14 m, flash and ``-resample`` sequences unchanged).
     repeat_fraction : float
-        Smallest fraction of the scan on the previous scan's rays for the point-to-point
-        answer to be kept (evidence measured above: fresh samples ≤ 0.08, repeated ≥ 0.63).
+        Smallest fraction of the scan on the previous scan's rays for that (measured: fresh
+        samples ≤ 0.08, repeated points ≥ 0.63).
     loop_closure : bool
         Revisits and pose-graph optimisation (:mod:`relnav.navigation.pose_graph`), in
         :meth:`Navigator.finalize` on the smoothed trajectory (the online poses are unchanged):
@@ -354,49 +347,9 @@ class NavigatorConfig:
     reloc_velocity: Literal["keep", "zero", "widen"] = "keep"
 
 
-_REPEAT_PATIENCE = 3
-_REPEAT_RETEST = 10
-
-
 def _rms_radius(P: np.ndarray) -> float:
     """RMS distance of the points from their centroid (m): the scan's lever arm."""
     return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
-
-
-def _normal_information(
-    P: np.ndarray,
-    T: np.ndarray,
-    idx: np.ndarray,
-    d2: np.ndarray,
-    normals: np.ndarray,
-    Om: np.ndarray,
-    inplane_var: float,
-    c2: float,
-) -> np.ndarray:
-    """The scan's information about the pose from the map's surface normals only (6×6, left
-    twist ``[ρ, φ]``, target frame).
-
-    **[interpretation]** The solver also pulls points weakly along the surface (``inplane_sigma``)
-    so that it converges, but that pull is only information when consecutive scans sample the
-    same surface points; a resampled surface (every real sensor) can slide along itself. The
-    information that goes to the filter, the degeneracy test and the covariances keeps the
-    normal part ``Ω − (I − n nᵀ)/σ_p²`` of each map patch, with the solver's robust weights.
-    """
-    ok = idx >= 0
-    if not ok.any():
-        return np.zeros((6, 6))
-    j = idx[ok]
-    X = P[ok] @ T[:3, :3].T + T[:3, 3]
-    n = normals[j]
-    On = Om[j] - (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / inplane_var
-    w = (c2 / (c2 + d2[ok])) ** 2
-    J = np.zeros((len(X), 3, 6))
-    J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
-    J[:, 0, 4], J[:, 0, 5] = X[:, 2], -X[:, 1]
-    J[:, 1, 3], J[:, 1, 5] = -X[:, 2], X[:, 0]
-    J[:, 2, 3], J[:, 2, 4] = X[:, 1], -X[:, 0]
-    H = np.einsum("n,nai,nab,nbj->ij", w, J, On, J, optimize=True)
-    return 0.5 * (H + H.T)
 
 
 def _spacing(P: np.ndarray) -> float:
@@ -427,14 +380,7 @@ class Navigator:
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.map: VoxelMap | None = None
         self._full = np.zeros((0, 3))  # the frame's finite points before the point budget
-        # the last accepted frame's finite points (sensor frame) and pose, for the repetition
-        # test; its search tree is built only when a test needs it
-        self._last_cloud: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._last_tree: tuple[int, cKDTree] | None = None
-        self._last_rays: cKDTree | None = None
-        self._pattern_repeats = False
-        self._ray_fraction = float("nan")
-        self._repeat_misses = 0  # consecutive tested frames without repeated points
+        self.repeats = RepeatedPoints(self)
         self.motion: ConstantVelocityFilter | None = None
         self.spacing0 = float("nan")
         self.n_frames = 0
@@ -498,8 +444,7 @@ class Navigator:
         self.n_frames, self._online, self._rescaled = 0, [], False
         self._boot_velocity = (v, P_vv)
         self.loop_closer = None
-        self._last_cloud, self._last_rays, self._last_tree = None, None, None
-        self._repeat_misses = 0
+        self.repeats = RepeatedPoints(self)
         if self.relocalizer is not None:
             self.relocalizer = Relocalizer(self)
         out = last
@@ -539,8 +484,7 @@ class Navigator:
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
         T_pred, P_pp = self.motion.predict(t)
-        if self.config.repeat_refine > 0:
-            self._pattern_repeats = self._same_rays(P)
+        self.repeats.observe_rays(P)
         try:
             result = self._register(P, T_pred, P_pp, timings)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
@@ -568,7 +512,7 @@ class Navigator:
             ts = time.perf_counter()
             Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-            self._last_cloud = (self._full, self.pose.copy(), self.n_frames)
+            self.repeats.remember(self._full, self.pose, self.n_frames)
             timings["map"] = time.perf_counter() - ts
         else:
             self.motion.skip()
@@ -711,9 +655,8 @@ class Navigator:
         self.map = self._new_map()
         Pm = even_subset(P, c.max_map_points)
         self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-        self._last_cloud = (self._full, self.pose.copy(), self.n_frames)
-        if c.repeat_refine > 0:
-            self._same_rays(P)
+        self.repeats.remember(self._full, self.pose, self.n_frames)
+        self.repeats.observe_rays(P)
         st0 = c.sigma_first_t * max(_rms_radius(P), self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
         sa_t = c.sigma_acc_t * self.spacing0
@@ -796,7 +739,7 @@ class Navigator:
             recovered=recovered,
             repeat_fraction=fit["repeat_fraction"],
             repeated_points=fit["repeated"],
-            same_rays=self._ray_fraction,
+            same_rays=self.repeats.ray_fraction,
         )
         status = "ok"
         message = ""
@@ -859,24 +802,12 @@ class Navigator:
     ) -> dict[str, Any]:
         """One registration onto the map and its quality figures (``rng``: the scan's median
         range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
-        under the motion model's prior).
-
-        With ``repeat_refine``, the point-to-plane answer is refined point to point when the
-        scan's points repeat the previous scan's (:meth:`_refine_repeated`); after
-        ``_REPEAT_PATIENCE`` primary registrations in a row without repetition, the test runs
-        on every ``_REPEAT_RETEST``-th frame only (it doubles the cost of a frame).
-        **[measured]** Registering point to point from the prediction once the last frames
-        repeated (one solve instead of two) loses sim-orion (APE 0.08 → 78.7 m): on the
-        capsule the point-to-plane solve is what finds the basin.
-        """
+        under the motion model's prior). With ``repeat_refine`` the answer is refined point to
+        point when the scan repeats the previous scan's surface points
+        (:mod:`relnav.navigation.repeated`)."""
         c = self.config
         assert self.map is not None
         v = self.map.voxel_size
-        repeat_frac = float("nan")
-        repeated = False
-        test = c.repeat_refine > 0 and not self._pattern_repeats
-        if test and self._repeat_misses >= _REPEAT_PATIENCE:
-            test = self.n_frames % _REPEAT_RETEST == 0
         fit = solve_scan_to_map(
             P,
             self.map.search_trees,
@@ -893,15 +824,10 @@ class Navigator:
             c0=float(c.kernel_start),
             decay=float(c.kernel_decay),
         )
-        if test and fit.n_pairs >= c.min_points:
-            trial, repeat_frac = self._refine_repeated(P, fit.T, T_pred, Lam, gate, rng)
-            if repeat_frac >= c.repeat_fraction:
-                fit, repeated = trial, True
-        if primary and test:
-            self._repeat_misses = 0 if repeated else self._repeat_misses + 1
+        fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lam, gate, rng, primary)
         n = len(P)
         if c.information == "normal":
-            H_cov = _normal_information(
+            H_cov = normal_information(
                 P,
                 fit.T,
                 fit.idx,
@@ -939,110 +865,6 @@ class Navigator:
             "repeat_fraction": repeat_frac,
             "repeated": repeated,
         }
-
-    def _same_rays(self, P: np.ndarray) -> bool:
-        """Whether the scan's rays repeat the previous scan's (a fixed pixel pattern).
-
-        **[interpretation]** A sensor with a fixed ray pattern (a flash LIDAR's pixels, a
-        scanner's beams) fires the same directions every frame; when it moves slowly, its
-        points nearly repeat in the target frame too, but they are new surface samples, and a
-        point-to-point fit to them aliases towards "no motion". Repeated surface points are
-        evidence only when the rays do not repeat. The rays repeat when at least a fifth of the
-        scan's directions lie within 1 % of the angular point spacing (``s₀`` over the median
-        range) of one of the previous scan's directions (measured on the suite: flash
-        sequences 0.42–1.0 per frame, paper 1's HPR presets at most 0.03). The scan's
-        directions are kept for the next frame.
-        """
-        u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
-        same = False
-        if self._last_rays is not None and len(P):
-            rng = float(np.median(np.linalg.norm(P, axis=1)))
-            eps = 0.01 * self.spacing0 / max(rng, 1e-12)
-            d, _ = self._last_rays.query(u, distance_upper_bound=eps)
-            self._ray_fraction = float(np.count_nonzero(np.isfinite(d))) / len(P)
-            same = self._ray_fraction >= 0.2
-        self._last_rays = cKDTree(u) if len(P) else None
-        return same
-
-    def _refine_repeated(
-        self,
-        P: np.ndarray,
-        T0: np.ndarray,
-        T_pred: np.ndarray,
-        Lam: np.ndarray,
-        gate: float,
-        rng: float,
-    ) -> tuple[ScanToMapFit, float]:
-        """Point-to-point refinement of a registration, and the evidence that points repeat.
-
-        **[interpretation]** When every scan samples the same surface points (a model cloud
-        sampled once, then observed with range noise), the in-plane position of each point is
-        measured and point-to-point registration onto the map's points is nearly exact, while
-        the weak in-plane pull of point-to-plane lets the pose slide along the surface. From the
-        point-to-plane answer ``T0`` (point to point from the prediction loses the capsule of
-        sim-orion: its first step settles at "no motion"), the scan is registered again with
-        isotropic information ``I / σ²``, ``σ = repeat_refine · s₀``, for every map point; the
-        evidence is :meth:`_repeat_evidence` at that pose.
-
-        Returns
-        -------
-        fit : ScanToMapFit
-            The point-to-point registration.
-        fraction : float
-            Fraction of the scan on the previous scan's rays (0 without a previous scan).
-        """
-        c = self.config
-        assert self.map is not None
-        v = self.map.voxel_size
-        sig = c.repeat_refine * self.spacing0
-        Om = np.broadcast_to(np.eye(3) / sig**2, (len(self.map), 3, 3))
-        fit = solve_scan_to_map(
-            P,
-            self.map.search_trees,
-            self.map.means,
-            np.ascontiguousarray(Om),
-            np.ascontiguousarray(T0),
-            np.ascontiguousarray(T_pred),
-            np.ascontiguousarray(Lam),
-            gate,
-            float(c.kernel),
-            int(c.max_iter),
-            c.tolerance * v,
-            c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start),
-            decay=float(c.kernel_decay),
-        )
-        if self._last_cloud is None:
-            return fit, 0.0
-        return fit, self._repeat_evidence(P, fit.T, sig)
-
-    def _repeat_evidence(self, P: np.ndarray, T: np.ndarray, sig: float) -> float:
-        """Fraction of the scan ``P`` (sensor frame, pose ``T``) whose points lie on the ray
-        of a point of the previous accepted scan: within ``sig`` of it across the ray and
-        ``s₀`` along it.
-
-        **[interpretation]** A LIDAR's noise is along its rays, so the same surface point seen
-        again from nearly the same direction lies on the same ray line up to the pose error;
-        a fresh surface sample is that close to an old one across the ray with probability
-        about ``π (sig/s₀)²``. The previous scan is taken whole (before the point budget),
-        so that a random budget does not hide the repetition.
-        """
-        assert self._last_cloud is not None
-        Q, T_prev, key = self._last_cloud
-        if self._last_tree is None or self._last_tree[0] != key:
-            self._last_tree = (key, cKDTree(Q @ T_prev[:3, :3].T + T_prev[:3, 3]))
-        tree = self._last_tree[1]
-        s0 = self.spacing0
-        X = P @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(X, k=4, distance_upper_bound=s0)
-        ok = np.isfinite(d)
-        D = tree.data[np.where(ok, j, 0)] - X[:, None, :]
-        ray = X - T[:3, 3]
-        ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-12)[:, None]
-        along = np.einsum("nkj,nj->nk", D, ray)
-        across2 = np.einsum("nkj,nkj->nk", D, D) - along**2
-        hit = (ok & (across2 < sig**2)).any(axis=1)
-        return float(np.count_nonzero(hit)) / max(len(P), 1)
 
     def finalize(self) -> np.ndarray:
         """Poses of every frame so far, smoothed when ``smooth_lag > 0``: ``(N, 4, 4)``.
