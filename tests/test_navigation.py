@@ -317,14 +317,14 @@ def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
 def test_normal_information_drops_the_in_plane_pull(rng):
     """On a flat patch the normals fix only z, roll and pitch: the normal-only information has
     no translation along the plane and no rotation about its normal, the solver's has."""
-    from relnav.navigation.navigator import _normal_information
+    from relnav.navigation.gicp import normal_information
 
     P = np.c_[rng.uniform(-5, 5, (200, 2)), np.zeros(200)]
     n = np.tile([0.0, 0.0, 1.0], (200, 1))
     sn2, sp2 = 0.01**2, 0.3**2
     nn = n[:, :, None] * n[:, None, :]
     Om = nn / sn2 + (np.eye(3) - nn) / sp2
-    H = _normal_information(P, np.eye(4), np.arange(200), np.zeros(200), n, Om, sp2, 9.0)
+    H = normal_information(P, np.eye(4), np.arange(200), np.zeros(200), n, Om, sp2, 9.0)
     free = [0, 1, 5]  # x, y translation and rotation about z
     assert np.allclose(H[np.ix_(free, free)], 0.0, atol=1e-6)
     fixed = [2, 3, 4]

@@ -33,7 +33,7 @@ from relnav.geometry.kdtree import _kd_query
 from relnav.geometry.lie import _rot_log
 from relnav.geometry.se3 import adjoint
 
-__all__ = ["ScanToMapFit", "left_information", "solve_scan_to_map"]
+__all__ = ["ScanToMapFit", "left_information", "normal_information", "solve_scan_to_map"]
 
 
 @njit(cache=True)
@@ -309,3 +309,39 @@ def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
     S = Ad @ S_body @ Ad.T
     L = np.linalg.pinv(0.5 * (S + S.T))
     return 0.5 * (L + L.T)
+
+
+def normal_information(
+    P: np.ndarray,
+    T: np.ndarray,
+    idx: np.ndarray,
+    d2: np.ndarray,
+    normals: np.ndarray,
+    Om: np.ndarray,
+    inplane_var: float,
+    c2: float,
+) -> np.ndarray:
+    """The scan's information about the pose from the map's surface normals only (6×6, left
+    twist ``[ρ, φ]``, target frame).
+
+    **[interpretation]** The solver also pulls points weakly along the surface (``inplane_sigma``)
+    so that it converges, but that pull is only information when consecutive scans sample the
+    same surface points; a resampled surface (every real sensor) can slide along itself. The
+    information that goes to the filter, the degeneracy test and the covariances keeps the
+    normal part ``Ω − (I − n nᵀ)/σ_p²`` of each map patch, with the solver's robust weights.
+    """
+    ok = idx >= 0
+    if not ok.any():
+        return np.zeros((6, 6))
+    j = idx[ok]
+    X = P[ok] @ T[:3, :3].T + T[:3, 3]
+    n = normals[j]
+    On = Om[j] - (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / inplane_var
+    w = (c2 / (c2 + d2[ok])) ** 2
+    J = np.zeros((len(X), 3, 6))
+    J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+    J[:, 0, 4], J[:, 0, 5] = X[:, 2], -X[:, 1]
+    J[:, 1, 3], J[:, 1, 5] = -X[:, 2], X[:, 0]
+    J[:, 2, 3], J[:, 2, 4] = X[:, 1], -X[:, 0]
+    H = np.einsum("n,nai,nab,nbj->ij", w, J, On, J, optimize=True)
+    return 0.5 * (H + H.T)

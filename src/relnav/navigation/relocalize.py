@@ -504,7 +504,7 @@ class Relocalizer:
                 G[:3, :3] = R
                 G[:3, 3] = cen - R @ cen
                 T0 = G @ T
-                fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius)
+                fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius, primary=False)
                 if not fit["usable"] or not np.all(np.isfinite(fit["T"])):
                     continue
                 dt, dr = _distance(fit["T"], T)
@@ -588,11 +588,11 @@ class Relocalizer:
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), s0)
         gate = max(c.reloc_gate * s0, 2.0 * nav.map.voxel_size)
-        pred = nav._solve(P, T_pred, nav._weak_prior(T_pred), gate, rng, radius)
+        pred = nav._solve(P, T_pred, nav._weak_prior(T_pred), gate, rng, radius, primary=False)
         limit = c.reloc_rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc_rms_ratio
         best: dict[str, Any] | None = None
         for T0, support in cands:
-            fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius)
+            fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius, primary=False)
             ok = (
                 fit["usable"]
                 and np.all(np.isfinite(fit["T"]))

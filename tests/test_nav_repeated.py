@@ -1,0 +1,81 @@
+"""The navigator's repeated-point refinement: scans that sample the same surface points are
+registered point to point; fresh surface samples and a fixed pixel pattern are not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nav_scenarios import flash_orbit
+from relnav.geometry.se3 import invert
+from relnav.io.sequences import ScanSequence
+from relnav.odometry import run_sequence
+from relnav.sim.presets import get_preset
+from relnav.sim.scenario import simulate
+
+
+def _sequence(tmp_path_factory, model_cloud: str) -> ScanSequence:
+    """First 8 frames of paper 1's Sim-Bennu (HPR, 1 cm noise, ~140 points per scan)."""
+    out = tmp_path_factory.mktemp(f"rep-{model_cloud}") / "seq"
+    simulate(get_preset("sim-bennu", max_frames=8, model_cloud=model_cloud), out)
+    return ScanSequence(out)
+
+
+@pytest.fixture(scope="module")
+def fixed_seq(tmp_path_factory):
+    return _sequence(tmp_path_factory, "fixed")
+
+
+@pytest.fixture(scope="module")
+def fresh_seq(tmp_path_factory):
+    return _sequence(tmp_path_factory, "resample")
+
+
+def _rms_step_error(poses, gt) -> float:
+    e = [
+        np.linalg.norm((invert(invert(gt[k - 1]) @ gt[k]) @ invert(poses[k - 1]) @ poses[k])[:3, 3])
+        for k in range(1, len(gt))
+    ]
+    return float(np.sqrt(np.mean(np.square(e))))
+
+
+def _repeated(run) -> list[bool]:
+    return [bool(s.result.info.get("repeated_points")) for s in run.steps if s.result is not None]
+
+
+def test_repeated_points_are_detected_and_registered_point_to_point(fixed_seq):
+    gt = fixed_seq.gt_poses
+    run = run_sequence(fixed_seq, "relnav")
+    assert all(_repeated(run)) and len(_repeated(run)) == len(gt) - 1
+    fractions = [s.result.info["repeat_fraction"] for s in run.steps if s.result is not None]
+    assert min(fractions) > 0.8  # the same points, on the same rays
+    err = _rms_step_error(run.poses, gt)
+    # at least as accurate as point-to-point ICP on these frames (measured 0.035 vs 0.054 m),
+    # and far better than the navigator without the refinement (0.32 m: the first step slides
+    # along the surface)
+    assert err <= _rms_step_error(run_sequence(fixed_seq, "icp-point").poses, gt)
+    off = run_sequence(fixed_seq, "relnav", repeat_refine=0)
+    assert not any(_repeated(off))
+    assert err < 0.5 * _rms_step_error(off.poses, gt)
+
+
+def test_fresh_surface_samples_are_not_repeated_points(fresh_seq):
+    run = run_sequence(fresh_seq, "relnav")
+    assert not any(_repeated(run))
+    fractions = [s.result.info["repeat_fraction"] for s in run.steps if s.result is not None]
+    assert max(f for f in fractions if np.isfinite(f)) < 0.2
+    off = run_sequence(fresh_seq, "relnav", repeat_refine=0)
+    np.testing.assert_allclose(run.poses, off.poses, atol=1e-9)
+
+
+def test_a_fixed_pixel_pattern_is_not_taken_for_repeated_points(tmp_path):
+    """A flash LIDAR fires the same rays every frame: its points nearly repeat when it moves
+    slowly, but they are new surface samples; the refinement is not even tried."""
+    out = tmp_path / "flash"
+    simulate(flash_orbit("rep-flash", max_frames=6), out)
+    seq = ScanSequence(out)
+    run = run_sequence(seq, "relnav")
+    info = [s.result.info for s in run.steps if s.result is not None]
+    assert all(i["same_rays"] > 0.9 for i in info)
+    assert all(np.isnan(i["repeat_fraction"]) and not i["repeated_points"] for i in info)
+    np.testing.assert_array_equal(run.poses, run_sequence(seq, "relnav", repeat_refine=0).poses)
