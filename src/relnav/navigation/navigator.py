@@ -379,7 +379,7 @@ class Navigator:
         self.config = NavigatorConfig(**options)
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.map: VoxelMap | None = None
-        self._full = np.zeros((0, 3))  # the frame's finite points before the point budget
+        self.full_scan = np.zeros((0, 3))  # the frame's finite points before the point budget
         self.repeats = RepeatedPoints(self)
         self.motion: ConstantVelocityFilter | None = None
         self.spacing0 = float("nan")
@@ -413,7 +413,7 @@ class Navigator:
         P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
-        self._full = P
+        self.full_scan = P
         P, _ = reduce_to_budget(P, self.config.max_points, seed=[0, self.n_frames])
         K = self.config.bootstrap_frames
         if self._boot is not None:
@@ -512,7 +512,7 @@ class Navigator:
             ts = time.perf_counter()
             Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-            self.repeats.remember(self._full, self.pose, self.n_frames)
+            self.repeats.remember(self.full_scan, self.pose, self.n_frames)
             timings["map"] = time.perf_counter() - ts
         else:
             self.motion.skip()
@@ -655,7 +655,7 @@ class Navigator:
         self.map = self._new_map()
         Pm = even_subset(P, c.max_map_points)
         self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-        self.repeats.remember(self._full, self.pose, self.n_frames)
+        self.repeats.remember(self.full_scan, self.pose, self.n_frames)
         self.repeats.observe_rays(P)
         st0 = c.sigma_first_t * max(_rms_radius(P), self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
