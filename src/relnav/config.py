@@ -110,6 +110,7 @@ OPTION_RANGES: dict[str, _Range] = {
     # relnav's navigator (relnav.navigation.NavigatorConfig)
     "voxel_factor": (0, False, None, False),
     "inplane_sigma": (0, False, None, False),
+    "nonplanar_gain": (0, True, None, False),
     "k_neighbors": (3, True, None, False),
     "max_voxel_weight": (1, True, None, False),
     "max_voxels": (1, True, None, False),

@@ -36,9 +36,10 @@ __all__ = ["VoxelMap", "even_subset", "plane_information"]
 
 @njit(cache=True)
 def _plane_info_kernel(
-    M: np.ndarray, nb: np.ndarray, inplane_var: float, noise_var: float
+    M: np.ndarray, nb: np.ndarray, inplane_var: float, noise_var: float, gain: float
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Information and normal of each row's neighbourhood ``M[nb[i]]`` (-1 entries skipped)."""
+    """Information and normal of each row's neighbourhood ``M[nb[i]]`` (-1 entries skipped);
+    ``gain``: the non-planarity gain ``γ`` of :func:`plane_information`."""
     q = nb.shape[0]
     info = np.zeros((q, 3, 3))
     nrm = np.zeros((q, 3))
@@ -86,7 +87,11 @@ def _plane_info_kernel(
             if w[a] < w[s]:
                 s = a
         n0, n1, n2 = V[0, s], V[1, s], V[2, s]
-        l0 = max(w[s], 0.0) + noise_var
+        lam0 = max(w[s], 0.0)
+        if gain > 0.0:
+            lam1 = max(w[0] + w[1] + w[2] - w[s] - max(w[0], max(w[1], w[2])), 1e-300)
+            lam0 *= 1.0 + gain * lam0 / lam1
+        l0 = lam0 + noise_var
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = n0, n1, n2
         nv = (n0, n1, n2)
         for a in range(3):
@@ -133,7 +138,11 @@ def _knn(tree: cKDTree, Q: np.ndarray, k: int, ids: np.ndarray) -> tuple[np.ndar
 
 
 def plane_information(
-    points: np.ndarray, neighbors: np.ndarray, inplane_sigma: float, noise_floor: float
+    points: np.ndarray,
+    neighbors: np.ndarray,
+    inplane_sigma: float,
+    noise_floor: float,
+    nonplanar_gain: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plane-like information matrices of neighbourhoods.
 
@@ -143,6 +152,15 @@ def plane_information(
     surface **[interpretation: GICP's plane regularisation with physical scales]**. Fewer than 3
     neighbours give ``Ω = I / σ_p²``.
 
+    With a non-planarity gain ``γ > 0`` the variance along the normal becomes
+    ``λ₀ (1 + γ λ₀/λ₁) + σ_n²`` (``λ₁``: the middle eigenvalue): a neighbourhood that is not a
+    plane (an edge, a corner, a rim, a small detail) gets less information along its fitted
+    normal, a plane or a gently curved surface keeps it. **[interpretation]** At such a patch
+    the plane model is wrong between the map's samples, so a scan point that falls between
+    them has a residual that depends on where the samples are, not on the pose; on sparse
+    scans of near-symmetric or small targets those residuals are what "constrains" the weak
+    directions (see :class:`relnav.navigation.navigator.NavigatorConfig`, ``nonplanar_gain``).
+
     Parameters
     ----------
     points : (M, 3) float64
@@ -151,6 +169,8 @@ def plane_information(
         Indices of each neighbourhood (``-1`` = none).
     inplane_sigma, noise_floor : float
         ``σ_p`` and ``σ_n`` in metres.
+    nonplanar_gain : float
+        ``γ`` (dimensionless, ``≥ 0``; 0: the plain plane model).
 
     Returns
     -------
@@ -164,6 +184,7 @@ def plane_information(
         np.ascontiguousarray(neighbors, dtype=np.int64),
         float(inplane_sigma) ** 2,
         float(noise_floor) ** 2,
+        float(nonplanar_gain),
     )
 
 
@@ -197,6 +218,9 @@ class VoxelMap:
     rebuild_fraction : float
         Rebuild the main search tree when the points added since the last rebuild exceed this
         fraction of the map.
+    nonplanar_gain : float
+        Non-planarity gain ``γ`` of the patches' information (:func:`plane_information`; 0 =
+        off).
     """
 
     def __init__(
@@ -209,6 +233,7 @@ class VoxelMap:
         inplane_sigma: float | None = None,
         k_neighbors: int = 10,
         rebuild_fraction: float = 0.1,
+        nonplanar_gain: float = 0.0,
     ) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
@@ -219,6 +244,9 @@ class VoxelMap:
         self.inplane_sigma = float(inplane_sigma) if inplane_sigma else 2.0 * self.voxel_size
         self.k_neighbors = int(k_neighbors)
         self.rebuild_fraction = float(rebuild_fraction)
+        if not (np.isfinite(nonplanar_gain) and nonplanar_gain >= 0):
+            raise ValueError(f"nonplanar_gain must be a number >= 0, got {nonplanar_gain}")
+        self.nonplanar_gain = float(nonplanar_gain)
         # voxel index: packed cell codes, sorted, and the storage slot of each
         self._codes = np.zeros(0, dtype=np.int64)
         self._code_slots = np.zeros(0, dtype=np.int64)
@@ -387,7 +415,9 @@ class VoxelMap:
             else:
                 d_b, i_b = np.full((len(Q), 1), np.inf), np.full((len(Q), 1), -1, np.int64)
             nb = _merge_knn(d_a, i_a, d_b, i_b, k)
-            info, nrm = plane_information(mu, nb, self.inplane_sigma, self.noise_floor)
+            info, nrm = plane_information(
+                mu, nb, self.inplane_sigma, self.noise_floor, self.nonplanar_gain
+            )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
         self._touched = set()
