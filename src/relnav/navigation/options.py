@@ -1,0 +1,333 @@
+"""The options of relnav's navigator (:class:`NavigatorConfig`, ``-O key=value``).
+
+Every option is documented with what it does and, where it was chosen on the navigation suite
+(``benchmarks/nav_suite.py``), with the measurements that chose it. The navigator itself is
+:class:`relnav.navigation.navigator.Navigator`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = ["NavigatorConfig"]
+
+
+@dataclass
+class NavigatorConfig:
+    """Options of :class:`Navigator` (``-O key=value`` on the command line).
+
+    Attributes
+    ----------
+    voxel_factor : float
+        Map voxel edge in multiples of the first scan's median point spacing ``s₀``.
+    max_voxel_weight : float
+        Observations after which a voxel forgets geometrically (map adapts to corrections).
+    max_voxels : int
+        Bound on the map size (least recently seen voxels dropped).
+    kernel : float
+        Geman–McClure scale on the Mahalanobis distance to a voxel (σ units).
+    kernel_start, kernel_decay : float
+        Graduated non-convexity: the scale starts at ``kernel_start`` and is multiplied by
+        ``kernel_decay`` each iteration until it reaches ``kernel``.
+    max_iter : int
+        Gauss–Newton iterations per frame.
+    tolerance : float
+        Stop when an update moves the pose by less than this × the map voxel (translation) and
+        rotates it by less than that length at the scan's median range. 1e-3 measured on the
+        suite: 15 % faster on 128×128 scans, but worse on the sparsest sequences; kept at 1e-4.
+    min_points : int
+        Scans with fewer finite points are ``failed``.
+    max_points : int
+        Point budget of the registration: larger scans are reduced to a seeded random subset
+        (in scan order) of this size (:func:`relnav.odometry.budget.reduce_to_budget`, seed
+        ``[0, frame]``). **[interpretation, measured]** An even subset of a raster scan (every
+        k-th pixel) repeats from frame to frame and aliases with the image rows; a random draw
+        does not. RPE translation, random vs even (first 10 frames of the ``dense-*`` presets;
+        first 80 of sim-eoi, seed 0): Kinect 221k points 7.3 vs 40.7 mm, flash at 30k 8.7 vs
+        18.4 mm, at 121k 13.0 vs 9.8 mm (worse), sim-eoi (3 200 points) 10.0 vs 10.9 mm.
+        4000 (all of sim-eoi's points): APE sim-eoi 0.032 → 0.008 m, sim-eoi-resample 0.068 →
+        0.032 m, 80–93 ms per frame instead of 29–31; other suite sequences unchanged.
+    max_map_points : int
+        Point budget of the map update (an evenly spaced subset of the registered points).
+    min_overlap : float
+        Smallest fraction of scan points with a map voxel within the gate for an ``ok`` step.
+    chi2_gate : float
+        Largest χ² (6 dof) of the correction against the motion model's uncertainty for an
+        ``ok`` step.
+    recover_rms_ratio : float
+        A step inconsistent with the motion model is registered again under the first frame's
+        weak prior and accepted if its robust residual is at most this times the first one's
+        (the model, not the scan, was wrong: a manoeuvre or an over-confident velocity).
+    bootstrap_frames : int
+        After this many frames, track them again from the velocity they revealed (once; 0 =
+        off, the default): the first step has no motion prior (see
+        :meth:`Navigator._bootstrap`). Measured on the suite with 5: better on sim-bennu,
+        sim-eoi and orion-inclined-64's wrong steps, worse on iridium-helical-64, so off.
+    init_window : int
+        Multi-view refinement of the first frames (0 = off, the default; else at least 3): once
+        this many frames are tracked their poses are refined together, the first one fixed,
+        then the map is rebuilt and the filter restarts (:mod:`relnav.navigation.multiview`
+        has the method and the suite's measurements: better on 9 of 17 sequences, worse on 3).
+    init_rounds, init_gate, init_solver, init_prior, init_prior_scale, init_inplane_sigma :
+        Rounds at most; pair gate (× ``s₀``); ``joint`` or ``loo`` solver; ``motion``,
+        ``velocity`` or ``weak`` prior and the factor on its 1σ; the joint refinement's
+        in-plane 1σ (× ``s₀``) — see :func:`relnav.navigation.multiview.refine_window`.
+    init_velocity, init_check, init_repeat :
+        The filter's velocity afterwards (``refined`` or ``keep``); keep a joint refinement only
+        if it is more certain of the last pose than the filter; refine once more over the first
+        ``init_repeat`` frames (0 = off; more than ``init_window``).
+    smooth_lag : int
+        Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
+        (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
+    adaptive_noise : bool
+        Scale the motion model's process noise by its recent normalised corrections.
+    min_degeneracy : float
+        Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
+        information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
+    sigma_acc_t, sigma_acc_r_deg : float
+        Motion model's white acceleration: 1σ change of the per-frame motion from one frame to
+        the next, translation in multiples of ``s₀``, rotation in degrees.
+    sigma_first_t, sigma_first_r_deg : float
+        1σ of the unknown motion over the first frame period: translation in multiples of the
+        first scan's RMS radius, rotation in degrees.
+    noise_floor : float
+        Smallest 1σ of a map patch along its normal, multiples of ``s₀``.
+    alert_limit_t, alert_limit_r_deg : float
+        Integrity monitoring (0 = off, the default): a step whose protection level exceeds
+        the alert limit (m, degrees) is flagged ``degenerate`` with the reason, its pose kept
+        (the scans do not determine that step to the required accuracy). The protection
+        level is ``protection_k`` × the largest 1σ of the step's translation (rotation) from
+        the filter's step covariance (recorded for every step as ``step_sigma_t``,
+        ``step_sigma_r_deg`` and the whole 6×6 ``step_covariance``, body frame).
+    protection_k : float
+        Multiplier of the step's 1σ in the protection level.
+    relocalise : bool
+        Global re-localisation against the map with paper 1's descriptor pipeline when the
+        navigator is lost or makes a suspect jump (:mod:`relnav.navigation.relocalize`).
+    lost_after : int
+        Consecutive frames that are not ``ok`` after which the navigator is lost.
+    reloc_every : int
+        While lost, try to relocalise every this many frames.
+    reloc_method : {"clique", "gcc"}
+        Consistent matches by maximum clique or by paper 1's geometric consistency grouping.
+    reloc_descriptor : str
+        Descriptor of the map and the scan (``fpfh``, ``hods``, ``shot``, …).
+    reloc_radius : float
+        Descriptor support radius, multiples of ``s₀``. **[measured]** Method, descriptor and
+        radius were chosen with ``benchmarks/nav_relocalize.py --probe`` (each third scan of
+        the last 40 % of a sequence located on the map of the first 60 %, from the pose 10
+        frames earlier; right = within 0.5 m / 5° of the navigator's own pose). Right scans
+        of 30 on eros-ellipse-64 / aura-ellipse-64, wrong ones in brackets: FPFH 6 s₀ clique
+        16 / 7 (0), FPFH 6 s₀ GCC 14 / 2 (0), FPFH 4 s₀ 14 / 3 (1), 8 s₀ 11 / 5 (0), 10 s₀
+        7 / 4 (2), SHOT 6 s₀ 12 / 9 (1), SHOT 10 s₀ 14 / 10 (0), HoD-S 6 s₀ 5 / 1 (0),
+        12 s₀ 4 / 3 (0); none of 24 on envisat-tumble-64 (50 points per scan) or on
+        orion-inclined-64 (a body of revolution) with any of them, and none wrong there.
+    reloc_tau : float
+        Descriptor-distance gate of the nearest-neighbour matching.
+    reloc_epsilon : float
+        Consistency tolerance of the pairwise distances, multiples of ``s₀``.
+    reloc_gate : float
+        Pair gate of the verifying registration, multiples of ``s₀``.
+    reloc_candidates : int
+        Candidate poses verified per attempt (disjoint consistent sets, largest first).
+    reloc_max_map_points, reloc_max_scan_points : int
+        Described map points (the map voxelised at ``s₀``) and scan points, at most.
+    reloc_rms_ratio : float
+        A relocalised pose must fit with a robust RMS at most this × the recent ``ok`` steps'
+        median; an ``ok`` step above it that is also a jump (see ``reloc_chi2``) is suspect.
+    reloc_chi2 : float
+        A step is a jump when it was recovered under the weak prior or its correction's χ²
+        against the motion model exceeds this (6 dof), or it follows a frame that was not
+        ``ok``. 25 flagged a right step of sim-orion (χ² 30–67 there on right steps), so the
+        navigator's own ``chi2_gate``.
+    reloc_suspect_ratio : float
+        An ``ok`` step whose robust RMS exceeds this × the recent median is suspect even
+        without a jump. Measured: kidnaps 2.9–3.1×, right steps up to 2.3× (a 9-point scan of
+        iridium-helical-64).
+    reloc_max_doubt : int
+        Suspect steps flagged in a row at most; then the navigator's own judgement stands
+        again until its next ``ok`` step. **[measured]** 20 frames removed at 3 places of
+        eros-ellipse-64 and aura-ellipse-64: 3 → tracks back after 2 of 6 kidnaps, 8 → 5 of 6
+        (the relocaliser needs a few scans of a new view).
+    reloc_overlap_ratio : float
+        An ``ok`` step whose overlap is below this × the recent median is suspect too
+        (measured: the overlap of every right step of the suite's 17 sequences is at least 0.99
+        × the recent median; kidnapped steps 0.55–0.80).
+    reloc_min_support : int
+        Fewest consistent matches that make a candidate pose.
+    reloc_ambiguity : float
+        A relocalisation is refused when a quarter/half turn of the scan converges to another
+        pose whose fitness is at least ``1 −`` this times the best one's and whose RMS is at
+        most ``1 +`` this times its RMS (a near-symmetric target; see
+        :meth:`relnav.navigation.relocalize.Relocalizer._ambiguous`). **[measured]** With
+        ``--probe`` (108 scans of four sequences, see ``reloc_radius``): off 26 right / 7 wrong,
+        0.1 25 / 2, 0.3 23 / 0, 0.5 19 / 0.
+    reloc_velocity : {"keep", "zero", "widen"}
+        The motion filter's velocity after a relocalisation: kept with its 1σ widened by
+        10 × the white acceleration, zeroed with the first frame's 1σ, or kept with the first
+        frame's 1σ (:meth:`relnav.navigation.relocalize.Relocalizer._reset_motion`).
+    information : {"full", "normal"}
+        The scan's information passed to the filter, the degeneracy test and the covariances:
+        the solver's own (``full``, default: the map patches' normals and their weak in-plane
+        pull), or from the normals only (``normal``,
+        :func:`~relnav.navigation.gicp.normal_information`). Measured on the suite (APE m,
+        wrong steps; full → normal): orion-inclined-64 8.09/14 → 4.40/5, aura-ellipse-64
+        0.40 → 0.58, envisat-tumble-64 0.81 → 1.04, iridium-helical-64 13.5/11 → 28.9/42
+        (12–30 points per scan: the filter then trusts the weak prior less than the in-plane
+        pull), others equal — so ``full`` stays the default.
+    inplane_sigma : float
+        1σ of a map patch along its own plane, multiples of ``s₀`` (weak: point-to-plane).
+    nonplanar_gain : float
+        ``γ`` of the map patches' information (0 = off, the default): a patch whose
+        neighbourhood is not a plane (an edge, a corner, a rim, a small detail; eigenvalues
+        ``λ₀ ≤ λ₁`` of its neighbourhood's covariance) has its variance along the normal
+        inflated to ``λ₀ (1 + γ λ₀/λ₁) + σ_n²`` (``plane_information`` in
+        :mod:`relnav.navigation.voxel_map`), so that the directions only such patches
+        constrain come from the motion model. **[measured]**
+        (``benchmarks/nav_weak_directions.py``) The suite's wrong steps are errors along the
+        weakest eigen-direction of the scan's information (body frame, rotations scaled by the
+        scan's lever arm), which under-estimate the motion there:
+        orion-inclined-64's 14 (steps 107–124) are 0.9–1.2° about Orion's symmetry axis with
+        the 0.5–0.6 m translation it implies, 96–100 % in that direction, online step NEES
+        3–20 (over-confident); iridium-helical-64's 11 (steps 1–7, 20–23) are 0.6–0.9° about
+        the target's x axis, 38–100 % (median 87 %) in it, NEES 0.1–3 (a start-up velocity
+        error the smoother spreads). Along that direction the scan's information is 0.97
+        (orion) and 0.52 (iridium) of the motion prior's (median over frames), 0.80 and 0.31
+        with γ = 100. On the suite (``nav_suite.py --methods relnav -O nonplanar_gain=100``;
+        APE m / wrong steps, off → on): iridium-helical-64 13.50/11 → 2.80/0,
+        orion-inclined-64 8.09/14 → 4.38/0, eros-ellipse-64 0.59 → 0.53,
+        asteroid-helical-128 0.81 → 0.71, but aura-ellipse-64 0.40 → 0.97,
+        envisat-tumble-64 0.81 → 1.10, voyager-ellipse-128 2.07/0 → 2.52/10, sim-eoi 0.05 →
+        0.17, sim-eoi-resample 0.07 → 2.51, sim-voyager 0.05 → 0.64/1, sim-voyager-resample
+        0.11 → 3.77/7, sim-orion 0.54 → 1.62/2, sim-orion-resample 31.9/33 → 72.1/59,
+        sim-bennu 0.82 → 1.26/1, sim-bennu-resample 10.0/6 → 16.7/17; no wrong step is
+        flagged either way. Single runs of those two sequences are one draw: under 12 neutral
+        perturbations of the solver (``--perturb 12``: ``kernel`` 2.9–3.1, ``kernel_decay``
+        0.58–0.62, ``max_iter`` 31–33) the unchanged navigator gives orion APE 4.6–14.2 m,
+        0–25 wrong steps; the medians go iridium 17.5 m/39.5 → 2.9/0, orion 7.35/11 →
+        5.2/7.5, and aura-ellipse-64's (6 perturbations) 0.44 → 1.00. Held-out sequences
+        (``--holdout``, not used to choose): comet-ellipse-64 0.47 → 0.43, voyager-helical-64
+        14.82/0 → 7.21/4, aura-tumble-64 0.64 → 0.83, capsule-ellipse-128 52.4 → 54.2 (249/249
+        wrong either way). Hence off by default
+        (γ = 10: iridium 1.65/0, orion 3.92/13, aura 0.94, envisat 1.15; γ = 30: iridium
+        4.67/0, orion 3.90/0, aura 0.91, envisat 1.63).
+    k_neighbors : int
+        Map points per patch (normal estimation).
+    repeat_refine : float
+        Repeated surface points (0 = off): 1σ (× ``s₀``) of a point-to-point refinement of
+        each registration, kept when the scan repeats the previous scan's surface points
+        (:mod:`relnav.navigation.repeated`, with the suite's figures: sim-orion APE 0.54 →
+        0.08 m, sim-bennu 0.82 → 0.14 m, flash and ``-resample`` sequences unchanged).
+    repeat_fraction : float
+        Smallest fraction of the scan on the previous scan's rays for that (measured: fresh
+        samples ≤ 0.08, repeated points ≥ 0.63).
+    loop_closure : bool
+        Revisits and pose-graph optimisation (:mod:`relnav.navigation.pose_graph`), in
+        :meth:`Navigator.finalize` on the smoothed trajectory (the online poses are unchanged):
+        keyframes with small submaps, loop edges registered onto old keyframes' submaps, and
+        the keyframes' pose graph; every accepted scan (its map subset) is kept until then.
+        **[measured]** Off by default: on the suite it halves the APE on eros-ellipse-64 and
+        voyager-ellipse-128 but multiplies it by 2.5 on aura-ellipse-64 (and 1.05 on
+        envisat-tumble-64); about 1.2 ms per frame, in ``finalize`` (see the module).
+    keyframe_every : int
+        Accepted frames between keyframes.
+    keyframe_window : int
+        A keyframe's submap merges the accepted frames within this many frames of it (both
+        sides; relative poses from the final trajectory), in its sensor frame.
+    loop_min_separation : int
+        A revisit closes only on keyframes at least this many keyframes older.
+    loop_max_distance : float
+        Largest distance between the two sensor positions of a revisit, fraction of the range.
+    loop_max_angle_deg : float
+        Largest angle between the two viewing directions of a revisit, degrees.
+    loop_min_overlap : float
+        Smallest overlap of a loop registration for the edge to be kept.
+    loop_max_rms : float
+        Largest robust residual (σ units) of a loop registration for the edge to be kept.
+    loop_chi2_gate : float
+        Largest χ² (6 dof) of the loop correction against the odometry's covariance between
+        the two keyframes for the edge to be kept.
+    loop_kernel : float
+        Geman–McClure scale of the loop edges in the pose graph (Mahalanobis units).
+    loop_info_scale : float
+        Factor on a loop registration's information in the pose graph.
+    loop_prior_scale : float
+        Factor on the information of a prior on each keyframe at its tracked pose (the
+        filter's pose covariance; 0 = none).
+    """
+
+    voxel_factor: float = 0.3
+    inplane_sigma: float = 3.0
+    nonplanar_gain: float = 0.0
+    k_neighbors: int = 10
+    repeat_refine: float = 0.1
+    repeat_fraction: float = 0.5
+    max_voxel_weight: float = 20.0
+    max_voxels: int = 200_000
+    kernel: float = 3.0
+    kernel_start: float = 100.0
+    kernel_decay: float = 0.6
+    max_iter: int = 30
+    tolerance: float = 1e-4
+    min_points: int = 6
+    max_points: int = 1500
+    max_map_points: int = 1500
+    min_overlap: float = 0.3
+    chi2_gate: float = 100.0
+    recover_rms_ratio: float = 1.5
+    adaptive_noise: bool = True
+    smooth_lag: int = 20
+    bootstrap_frames: int = 0
+    init_window: int = 0
+    init_rounds: int = 10
+    init_gate: float = 3.0
+    init_repeat: int = 0
+    init_solver: Literal["loo", "joint"] = "joint"
+    init_prior: Literal["weak", "motion", "velocity"] = "motion"
+    init_prior_scale: float = 1.0
+    init_inplane_sigma: float = 3.0
+    init_velocity: Literal["refined", "keep"] = "refined"
+    init_check: bool = True
+    min_degeneracy: float = 1e-6
+    sigma_acc_t: float = 0.2
+    sigma_acc_r_deg: float = 0.2
+    sigma_first_t: float = 5.0
+    sigma_first_r_deg: float = 30.0
+    noise_floor: float = 0.03
+    alert_limit_t: float = 0.0
+    alert_limit_r_deg: float = 0.0
+    protection_k: float = 3.0
+    information: Literal["full", "normal"] = "full"
+    loop_closure: bool = False
+    keyframe_every: int = 5
+    keyframe_window: int = 5
+    loop_min_separation: int = 10
+    loop_max_distance: float = 0.15
+    loop_max_angle_deg: float = 15.0
+    loop_min_overlap: float = 0.5
+    loop_max_rms: float = 3.0
+    loop_chi2_gate: float = 50.0
+    loop_kernel: float = 5.0
+    loop_info_scale: float = 1.0
+    loop_prior_scale: float = 0.0
+    relocalise: bool = True
+    lost_after: int = 3
+    reloc_every: int = 1
+    reloc_method: Literal["clique", "gcc"] = "clique"
+    reloc_descriptor: str = "fpfh"
+    reloc_radius: float = 6.0
+    reloc_tau: float = 1.0
+    reloc_epsilon: float = 2.0
+    reloc_gate: float = 4.0
+    reloc_candidates: int = 3
+    reloc_max_map_points: int = 2000
+    reloc_max_scan_points: int = 400
+    reloc_rms_ratio: float = 1.5
+    reloc_chi2: float = 100.0
+    reloc_suspect_ratio: float = 2.5
+    reloc_overlap_ratio: float = 0.9
+    reloc_max_doubt: int = 8
+    reloc_min_support: int = 6
+    reloc_ambiguity: float = 0.3
+    reloc_velocity: Literal["keep", "zero", "widen"] = "keep"
