@@ -190,7 +190,8 @@ def test_pose_noise_from_second_differences(rng):
     v = np.array([1.0, 0.2, 0.0, 0.0, 0.0, 0.03])
     for _ in range(400):
         T = T @ exp_se3(v)
-        noisy = T @ exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)])
+        # the noise of the target's own position and attitude (left twist, target frame)
+        noisy = exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)]) @ T
         steps.append(SimpleNamespace(pose=noisy, status="ok"))
     nt, nr = pose_noise(steps)
     assert 0.035 < nt < 0.07

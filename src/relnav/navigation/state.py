@@ -120,6 +120,8 @@ def relative_state(
     gt_poses: np.ndarray | None = None,
     n_mean_motion: float = 0.0,
     filter: str = "ukf",
+    acceleration: float = 1e-4,
+    angular_acceleration: float | None = None,
     **tracker_options: Any,
 ) -> TrackResult:
     """Estimate the target's relative state from a navigator run.
@@ -137,8 +139,18 @@ def relative_state(
         Clohessy–Wiltshire mean motion of the target's orbit, rad/s (0: free motion).
     filter : {"ukf", "ekf"}
         Paper 2's twistor UKF (default) or the quaternion EKF.
+    acceleration : float
+        1σ of the unmodelled relative acceleration, m/s² (default 1e-4, the order of the
+        Clohessy–Wiltshire terms ``3n²r`` a free model leaves out at a 50 m hold point in low
+        orbit, 1.8e-4): the process noise of position and velocity
+        (:class:`relnav.fusion.noise.ProcessNoise`).
+    angular_acceleration : float, optional
+        1σ of the target's angular acceleration, rad/s², when known. Default: the bound of a
+        torque-free rigid body, ``E|ω|²/√3`` from the filter's own rate
+        (``ProcessNoise.torque_free``).
     **tracker_options
-        Passed to :class:`relnav.fusion.tracker.Tracker` (``q``, ``p0``, ``omega0`` …). With the
+        Passed to :class:`relnav.fusion.tracker.Tracker` (``q`` replaces the process noise above,
+        ``p0``, ``omega0``, ``gate_probability`` …). With the
         UKF, ``observer_bias`` defaults to True: each step's covariance
         (:func:`drift_covariance`) feeds the bias state, in the target's axes
         (``bias_frame="body"``).
@@ -173,17 +185,17 @@ def relative_state(
         T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(frames)]])
         truth = TrackTruth.from_poses(np.asarray(run.timestamps, dtype=float), T_st_gt)
     if "q" not in tracker_options:
-        # [interpretation] process noise per frame period from the poses' own white noise: the
-        # state may move by one noise step per frame, its rates by one noise step per period
-        t = np.asarray(run.timestamps, dtype=float)
-        dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-        dt = dt if np.isfinite(dt) and dt > 0 else 1.0
-        nt, nr = max(noise[0], 1e-4), max(noise[1], 1e-5)
+        # [interpretation] the process noise is the physics a user can state, not the poses'
+        # white noise: the target's reference point and attitude move only through their rates,
+        # which change by the accelerations held over each step (no random walks)
         tracker_options["q"] = {
-            "position": nt,
-            "velocity": nt / dt,
-            "attitude": nr,
-            "omega": nr / dt,
+            "position": 0.0,
+            "velocity": 0.0,
+            "attitude": 0.0,
+            "omega": 0.0,
+            "acceleration": float(acceleration),
+            "angular_acceleration": float(angular_acceleration or 0.0),
+            "torque_free": angular_acceleration is None,
         }
     if filter == "ukf":
         # the navigator's slowly varying map drift is a bias of its observations, not target
@@ -199,11 +211,18 @@ def relative_state(
 def pose_noise(steps: Sequence[Any]) -> tuple[float, float]:
     """White noise of the navigator's poses (1σ: m, rad), from their second differences.
 
-    For smooth motion the second difference ``log(Δ_{k-1}⁻¹ Δ_k)`` of the steps
-    ``Δ_k = T_{k-1}⁻¹ T_k`` is dominated by the pose noise, whose variance it multiplies by 6
-    (weights 1, −2, 1). A robust (MAD) scale per component, averaged over the axes
-    **[interpretation: no ground truth involved; true accelerations count as noise, which is
-    conservative]**. Frames the navigator flagged are left out.
+    The noise is measured in the coordinates it is added to: the observations' (a left twist
+    ``T = exp(δ) T_true`` of ``T_target_sensor``, target frame, i.e. the target's own position
+    and attitude errors). For smooth motion the second difference ``log(Λ_k Λ_{k-1}⁻¹)`` of the
+    left steps ``Λ_k = T_k T_{k-1}⁻¹`` is dominated by the pose noise, whose variance it
+    multiplies by 6 (weights 1, −2, 1); for a target spinning at a constant rate before a
+    chaser at a hold point the left steps are constant. A robust (MAD) scale per component,
+    averaged over the axes **[interpretation: no ground truth involved; true accelerations
+    count as noise, which is conservative]**. Frames the navigator flagged are left out.
+
+    The right steps ``T_{k-1}⁻¹ T_k`` (sensor axes) would add the attitude noise times the
+    range as translation (measured on envisat-tumble-64, 20 noise seeds: 0.051 m against
+    0.0075 m in the target's coordinates, whose truth-based MAD is 0.0072 m).
     """
     from relnav.geometry.lie import log_se3
 
@@ -212,9 +231,9 @@ def pose_noise(steps: Sequence[Any]) -> tuple[float, float]:
     d2 = []
     for k in range(2, len(poses)):
         if ok[k] and ok[k - 1] and ok[k - 2]:
-            a = invert(poses[k - 2]) @ poses[k - 1]
-            b = invert(poses[k - 1]) @ poses[k]
-            d2.append(log_se3(invert(a) @ b))
+            a = poses[k - 1] @ invert(poses[k - 2])
+            b = poses[k] @ invert(poses[k - 1])
+            d2.append(log_se3(b @ invert(a)))
     if len(d2) < 3:
         return 0.0, 0.0
     D = np.asarray(d2)
