@@ -56,9 +56,10 @@ class ProcessNoise:
         Add the bound of a torque-free rigid body's angular acceleration (default False):
         Euler's equations give ``|ω̇ᵢ| = |Iⱼ − Iₖ| |ωⱼ ωₖ| / Iᵢ ≤ |ωⱼ ωₖ|`` whatever the inertia
         (``|Iⱼ − Iₖ| ≤ Iᵢ`` for principal moments), so ``|ω̇| ≤ |ω|²/√3``; the filter takes
-        ``angular_acceleration + E|ω|²/√3`` (``E|ω|² = |ω̂|² + tr P_ω`` at the start of each
-        step) as the step's ``α``. It is a bound: a target spinning about a principal axis has
-        ``ω̇ = 0`` and gets a conservative rate.
+        ``angular_acceleration + |ω̂|²/√3`` (``ω̂`` the estimate at the start of each step) as
+        the step's ``α``. Not ``E|ω|² = |ω̂|² + tr P_ω``: the rate's covariance would then grow
+        its own process noise (it diverges where the rate is unobserved). It is a bound: a target
+        spinning about a principal axis has ``ω̇ = 0`` and gets a conservative rate.
     """
 
     position: float = 1e-4

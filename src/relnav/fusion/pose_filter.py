@@ -203,8 +203,8 @@ class PoseFilter:
         var = s * np.repeat(np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3)
         alpha = qn.angular_acceleration
         if qn.torque_free:
-            P_w = self.physical_covariance()[9:12, 9:12]
-            alpha += (float(self._w @ self._w) + float(np.trace(P_w))) / math.sqrt(3.0)
+            # the estimated rate only: its covariance in the bound would feed back on itself
+            alpha += float(self._w @ self._w) / math.sqrt(3.0)
         a = qn.acceleration
         held = np.array([0.5 * a * dt * dt, a * dt, 0.5 * alpha * dt * dt, alpha * dt])
         return var + np.repeat(held**2, 3)
