@@ -2,6 +2,7 @@
 
     python benchmarks/nav_state.py --out bench/nav              # envisat-tumble-64, aura-tumble-64
     python benchmarks/nav_state.py --out bench/nav --seeds 20   # Monte Carlo over noise seeds
+    python benchmarks/nav_state.py --out bench/nav --compare suite   # both process noises
 
 Runs ``relnav`` on the navigation suite's tumbling sequences (simulated once into
 ``OUT/sequences`` by ``benchmarks/nav_suite.py``'s definitions), feeds its poses to paper 2's
@@ -16,6 +17,12 @@ step, the NEES averaged over the N runs against the 95 % band of such an average
 of steps inside it), and the pooled mean NEES of each 3-dim block (position, velocity,
 attitude, angular rate; 3 when consistent). One run's time average is not a fair test: its
 errors are correlated from step to step (the navigator's map drift), so its band is too narrow.
+
+``--compare suite`` (or ``holdout``) runs ``relnav`` once on every sequence of the suite (with the
+paper presets) or of the held-out set and prints, as a markdown table, the relative state's errors
+after the first 30 % of the frames with ``relative_state(process_noise="poses")`` → ``"physics"``:
+RMS of the position, velocity and attitude error vectors, the angular-rate error's median and
+max, and the mean 12-dim NEES (a time average of one run: indicative, no band).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, suite
+from nav_suite import holdout, paper, suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -61,16 +68,53 @@ def simulate_seeds(out: Path, name: str, seeds: int) -> list[Path]:
     return folders
 
 
-def track(folder: Path, options: dict[str, str] | None = None):
+def track(folder: Path, options: dict[str, str] | None = None, process_noises=("physics",)):
     """``relnav`` (with ``options``, strings as on the command line) on one sequence and the
-    relative state from its poses."""
+    relative state from its poses, one per ``process_noises`` (a list) or the first alone."""
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import relative_state
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(folder)
     run = run_sequence(seq, "relnav", **(options or {}))
-    return relative_state(run, gt_poses=seq.gt_poses)
+    out = [relative_state(run, gt_poses=seq.gt_poses, process_noise=p) for p in process_noises]
+    return out if len(out) > 1 else out[0]
+
+
+def state_errors(res) -> tuple[float, ...]:
+    """RMS position (m), velocity (mm/s), attitude (deg) error vectors, rate error median and
+    max (deg/s) and mean 12-dim NEES, after the first 30 % of the frames."""
+    k0 = round(0.3 * len(res))
+    e = {k: v[k0:] for k, v in res.errors().items()}
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.nanmean(np.sum(x**2, axis=1))))
+
+    w = np.degrees(np.linalg.norm(e["omega"], axis=1))
+    return (
+        rms(e["position"]),
+        1e3 * rms(e["velocity"]),
+        np.degrees(rms(e["attitude"])),
+        float(np.nanmedian(w)),
+        float(np.nanmax(w)),
+        float(np.nanmean(res.nees()[k0:])),
+    )
+
+
+def report_compare(out: Path, which: str, opts: dict[str, str]) -> None:
+    from nav_suite import simulate_suite
+
+    pool = holdout() if which == "holdout" else {**suite(), **paper()}
+    print("| sequence | position m | velocity mm/s | attitude ° | rate median / max °/s | NEES |")
+    print("|---|---|---|---|---|---|")
+    for name, folder in simulate_suite(out, list(pool)).items():
+        a, b = (state_errors(r) for r in track(folder, opts, ("poses", "physics")))
+        print(
+            f"| {name} | {a[0]:.3f} → {b[0]:.3f} | {a[1]:.2f} → {b[1]:.2f} | {a[2]:.2f} → "
+            f"{b[2]:.2f} | {a[3]:.3f} / {a[4]:.3f} → {b[3]:.3f} / {b[4]:.3f} | {a[5]:.1f} → "
+            f"{b[5]:.1f} |",
+            flush=True,
+        )
 
 
 def report_single(name: str, res) -> None:
@@ -143,8 +187,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
+    p.add_argument(
+        "--compare",
+        choices=["suite", "holdout"],
+        help="process noise 'poses' → 'physics' on every sequence (one run each)",
+    )
     a = p.parse_args(argv)
     opts = dict(kv.split("=", 1) for kv in a.options)
+    if a.compare:
+        report_compare(a.out, a.compare, opts)
+        return 0
     if a.seeds <= 1:
         for name, folder in simulate_suite(a.out, TUMBLING).items():
             report_single(name, track(folder, opts))

@@ -262,3 +262,40 @@ def test_state_sigma_and_covariance_shapes() -> None:
         np.testing.assert_allclose(s["omega"], 0.1)
         assert f.physical_covariance().shape == (12, 12)
         assert f.nees([0, 0, 0], [0, 0, 0], [0, 0, 0, 1.0], [0, 0, 0]) == pytest.approx(0.0)
+
+
+def test_accelerations_held_over_a_step_give_the_process_noise() -> None:
+    a, alpha, dt = 2e-4, 3e-5, 2.0
+    q = ProcessNoise(0.0, 0.0, 0.0, 0.0, acceleration=a, angular_acceleration=alpha)
+    for f in (TwistorUKF(dt=dt, q=q), QuaternionEKF(dt=dt, q=q)):
+        want = np.repeat([0.5 * a * dt**2, a * dt, 0.5 * alpha * dt**2, alpha * dt], 3) ** 2
+        np.testing.assert_allclose(f._phys_process_var(dt), want, rtol=1e-12)
+        # an acceleration held over a step: twice the step, twice the change of rate
+        np.testing.assert_allclose(f._phys_process_var(2 * dt)[9:], 4 * want[9:], rtol=1e-12)
+
+
+def test_torque_free_bound_covers_euler_equations(rng: np.random.Generator) -> None:
+    # any rigid body's principal moments obey the triangle inequalities, hence |ω̇| ≤ |ω|²/√3
+    for _ in range(2000):
+        J = rng.uniform(0.01, 1.0, 3)
+        if 2 * J.max() > J.sum():
+            continue  # not a rigid body's principal moments
+        w = rng.normal(size=3) * rng.uniform(0.001, 1.0)
+        w_dot = (
+            np.array(
+                [
+                    (J[1] - J[2]) * w[1] * w[2],
+                    (J[2] - J[0]) * w[2] * w[0],
+                    (J[0] - J[1]) * w[0] * w[1],
+                ]
+            )
+            / J
+        )
+        assert np.linalg.norm(w_dot) <= (w @ w) / math.sqrt(3.0) * (1 + 1e-12)
+    # the filter takes α = |ω̂|²/√3 from its own estimate (not its covariance)
+    w0 = np.radians([0.3, 0.4, 1.2])
+    q = ProcessNoise(0.0, 0.0, 0.0, 0.0, torque_free=True)
+    ukf = TwistorUKF(dt=2.0, q=q, omega0=w0, p0={"omega": 1.0})
+    alpha = (w0 @ w0) / math.sqrt(3.0)
+    np.testing.assert_allclose(ukf._phys_process_var(2.0)[9:], (alpha * 2.0) ** 2, rtol=1e-9)
+    assert np.all(ukf._phys_process_var(2.0)[:6] == 0.0)

@@ -167,11 +167,12 @@ def tumble_run(tmp_path_factory):
     return seq, run_sequence(seq, "relnav")
 
 
-def test_relative_state_recovers_the_spin_rate(tumble_run):
+@pytest.mark.parametrize("process_noise", ["poses", "physics"])
+def test_relative_state_recovers_the_spin_rate(tumble_run, process_noise):
     from relnav.navigation.state import relative_state
 
     seq, run = tumble_run
-    res = relative_state(run, gt_poses=seq.gt_poses)
+    res = relative_state(run, gt_poses=seq.gt_poses, process_noise=process_noise)
     k0 = len(res) // 3
     err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
     rate = np.degrees(np.linalg.norm(res.truth.omega[k0:], axis=1))
@@ -186,15 +187,19 @@ def test_pose_noise_from_second_differences(rng):
 
     from relnav.navigation.state import pose_noise
 
-    steps, T = [], np.eye(4)
     v = np.array([1.0, 0.2, 0.0, 0.0, 0.0, 0.03])
-    for _ in range(400):
-        T = T @ exp_se3(v)
-        noisy = T @ exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)])
-        steps.append(SimpleNamespace(pose=noisy, status="ok"))
-    nt, nr = pose_noise(steps)
-    assert 0.035 < nt < 0.07
-    assert 0.0014 < nr < 0.0028
+    for frame in ("sensor", "target"):
+        steps, T = [], np.eye(4)
+        for _ in range(400):
+            T = T @ exp_se3(v)
+            e = exp_se3(np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.002, 3)])
+            # sensor: a right twist (sensor axes); target: a left twist (the target's own
+            # position and attitude)
+            noisy = T @ e if frame == "sensor" else e @ T
+            steps.append(SimpleNamespace(pose=noisy, status="ok"))
+        nt, nr = pose_noise(steps, frame=frame)
+        assert 0.035 < nt < 0.07
+        assert 0.0014 < nr < 0.0028
 
 
 def test_unreadable_scan_is_flagged_and_the_navigator_goes_on(orbit_seq, tmp_path):

@@ -29,7 +29,13 @@ def _positive_fields(obj: Any) -> None:
 
 @dataclass(frozen=True)
 class ProcessNoise:
-    """Process noise, 1σ per nominal step.
+    """Process noise: random walks (1σ per nominal step) and accelerations held over a step.
+
+    The four random walks are Paper 2's (variance scaled by ``Δt/dt`` for a step of ``Δt``).
+    The accelerations state the physics instead **[interpretation, not in Paper 2]**: an
+    acceleration ``a`` (angular: ``α``) held constant over a step of ``Δt`` s moves the velocity
+    by ``a Δt`` and the position by ``a Δt²/2``; each adds that squared to the variances
+    (diagonal: their correlation is dropped).
 
     Attributes
     ----------
@@ -41,12 +47,28 @@ class ProcessNoise:
         rad (default 4e-3 = pose-twist 1e-3, since ``B_r ≈ δθ/4``).
     omega : float
         rad/s (default 1e-3).
+    acceleration : float
+        1σ of the unmodelled relative acceleration of the target's reference point, m/s²
+        (default 0): the chaser's thrusts, the orbital terms a free model leaves out.
+    angular_acceleration : float
+        1σ of the target's angular acceleration, rad/s² (default 0).
+    torque_free : bool
+        Add the bound of a torque-free rigid body's angular acceleration (default False):
+        Euler's equations give ``|ω̇ᵢ| = |Iⱼ − Iₖ| |ωⱼ ωₖ| / Iᵢ ≤ |ωⱼ ωₖ|`` whatever the inertia
+        (``|Iⱼ − Iₖ| ≤ Iᵢ`` for principal moments), so ``|ω̇| ≤ |ω|²/√3``; the filter takes
+        ``angular_acceleration + |ω̂|²/√3`` (``ω̂`` the estimate at the start of each step) as
+        the step's ``α``. Not ``E|ω|² = |ω̂|² + tr P_ω``: the rate's covariance would then grow
+        its own process noise (it diverges where the rate is unobserved). It is a bound: a target
+        spinning about a principal axis has ``ω̇ = 0`` and gets a conservative rate.
     """
 
     position: float = 1e-4
     velocity: float = 1e-4
     attitude: float = 4e-3
     omega: float = 1e-3
+    acceleration: float = 0.0
+    angular_acceleration: float = 0.0
+    torque_free: bool = False
 
     def __post_init__(self) -> None:
         _positive_fields(self)
@@ -100,7 +122,8 @@ def _coerce(cls: type, value: Any, name: str) -> Any:
         bad = sorted(set(value) - known)
         if bad:
             raise ConfigError(f"{name}: unknown key(s) {bad}; accepted: {sorted(known)}")
-        return cls(**{k: float(v) for k, v in value.items()})
+        flags = {f.name for f in fields(cls) if f.type in (bool, "bool")}
+        return cls(**{k: (bool(v) if k in flags else float(v)) for k, v in value.items()})
     if isinstance(value, int | float) and cls is MeasurementNoise:
         raise ConfigError(f"{name}: give a MeasurementNoise, a dict or a (6, 6) matrix")
     raise ConfigError(

@@ -195,10 +195,19 @@ class PoseFilter:
         return R
 
     def _phys_process_var(self, dt: float) -> np.ndarray:
-        """Physical process variances ``(12,)`` ``[d, v, θ, ω]`` for a step of ``dt`` s."""
+        """Physical process variances ``(12,)`` ``[d, v, θ, ω]`` for a step of ``dt`` s: the
+        random walks of :class:`ProcessNoise` and its accelerations held over the step."""
         qn = self.q_noise
-        s = abs(dt) / self.dt
-        return s * np.repeat(np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3)
+        dt = abs(dt)
+        s = dt / self.dt
+        var = s * np.repeat(np.array([qn.position, qn.velocity, qn.attitude, qn.omega]) ** 2, 3)
+        alpha = qn.angular_acceleration
+        if qn.torque_free:
+            # the estimated rate only: its covariance in the bound would feed back on itself
+            alpha += float(self._w @ self._w) / math.sqrt(3.0)
+        a = qn.acceleration
+        held = np.array([0.5 * a * dt * dt, a * dt, 0.5 * alpha * dt * dt, alpha * dt])
+        return var + np.repeat(held**2, 3)
 
     # --- state ------------------------------------------------------------------------------
 
