@@ -45,7 +45,12 @@ from scipy.spatial import cKDTree
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
-from relnav.navigation.gicp import left_information, normal_information, solve_scan_to_map
+from relnav.navigation.gicp import (
+    ScanToMapFit,
+    left_information,
+    normal_information,
+    solve_scan_to_map,
+)
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.options import NavigatorConfig
 from relnav.navigation.pose_graph import LoopCloser
@@ -508,6 +513,41 @@ class Navigator:
         st, sr = self._first_sigma
         return left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
 
+    def register_on_map(
+        self,
+        P: np.ndarray,
+        info: np.ndarray,
+        T0: np.ndarray,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+    ) -> ScanToMapFit:
+        """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
+        per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
+        Lam)`` (left twist information, target frame); ``gate`` the pair gate (m), ``rng`` the
+        scan's median range (m, for the rotation tolerance). The solver's options come from the
+        configuration (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
+        c = self.config
+        assert self.map is not None
+        v = self.map.voxel_size
+        return solve_scan_to_map(
+            P,
+            self.map.search_trees,
+            self.map.means,
+            info,
+            np.ascontiguousarray(T0),
+            np.ascontiguousarray(T_pred),
+            np.ascontiguousarray(Lam),
+            gate,
+            float(c.kernel),
+            int(c.max_iter),
+            c.tolerance * v,
+            c.tolerance * v / max(rng, 1.0),
+            c0=float(c.kernel_start),
+            decay=float(c.kernel_decay),
+        )
+
     def _solve(
         self,
         P: np.ndarray,
@@ -525,23 +565,7 @@ class Navigator:
         (:mod:`relnav.navigation.repeated`)."""
         c = self.config
         assert self.map is not None
-        v = self.map.voxel_size
-        fit = solve_scan_to_map(
-            P,
-            self.map.search_trees,
-            self.map.means,
-            self.map.information,
-            np.ascontiguousarray(T_pred),
-            np.ascontiguousarray(T_pred),
-            np.ascontiguousarray(Lam),
-            gate,
-            float(c.kernel),
-            int(c.max_iter),
-            c.tolerance * v,
-            c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start),
-            decay=float(c.kernel_decay),
-        )
+        fit = self.register_on_map(P, self.map.information, T_pred, T_pred, Lam, gate, rng)
         fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lam, gate, rng, primary)
         n = len(P)
         if c.information == "normal":

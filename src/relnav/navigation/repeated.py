@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.navigation.gicp import ScanToMapFit, solve_scan_to_map
+from relnav.navigation.gicp import ScanToMapFit
 
 if TYPE_CHECKING:  # pragma: no cover
     from relnav.navigation.navigator import Navigator
@@ -187,27 +187,10 @@ class RepeatedPoints:
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
         nav = self.nav
-        c = nav.config
         assert nav.map is not None
-        v = nav.map.voxel_size
-        sig = c.repeat_refine * nav.spacing0
+        sig = nav.config.repeat_refine * nav.spacing0
         Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(nav.map), 3, 3)))
-        fit = solve_scan_to_map(
-            P,
-            nav.map.search_trees,
-            nav.map.means,
-            Om,
-            np.ascontiguousarray(T0),
-            np.ascontiguousarray(T_pred),
-            np.ascontiguousarray(Lam),
-            gate,
-            float(c.kernel),
-            int(c.max_iter),
-            c.tolerance * v,
-            c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start),
-            decay=float(c.kernel_decay),
-        )
+        fit = nav.register_on_map(P, Om, T0, T_pred, Lam, gate, rng)
         return fit, self.evidence(P, fit.T, sig)
 
     def evidence(self, P: np.ndarray, T: np.ndarray, sig: float) -> float:
