@@ -79,3 +79,12 @@ def test_a_fixed_pixel_pattern_is_not_taken_for_repeated_points(tmp_path):
     assert all(i["same_rays"] > 0.9 for i in info)
     assert all(np.isnan(i["repeat_fraction"]) and not i["repeated_points"] for i in info)
     np.testing.assert_array_equal(run.poses, run_sequence(seq, "relnav", repeat_refine=0).poses)
+
+
+@pytest.mark.parametrize("bad", [{"repeat_refine": -0.1}, {"repeat_fraction": 1.5}])
+def test_bad_repeat_options_are_one_config_error(bad) -> None:
+    from relnav.errors import ConfigError
+    from relnav.navigation import Navigator
+
+    with pytest.raises(ConfigError, match=next(iter(bad))):
+        Navigator(**bad)
