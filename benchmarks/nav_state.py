@@ -3,6 +3,7 @@
     python benchmarks/nav_state.py --out bench/nav              # envisat-tumble-64, aura-tumble-64
     python benchmarks/nav_state.py --out bench/nav --seeds 20   # Monte Carlo over noise seeds
     python benchmarks/nav_state.py --out bench/nav --compare suite   # both process noises
+    python benchmarks/nav_state.py --out bench/nav --seeds 20 -S drift=map  # relative_state option
 
 Runs ``relnav`` on the navigation suite's tumbling sequences (simulated once into
 ``OUT/sequences`` by ``benchmarks/nav_suite.py``'s definitions), feeds its poses to paper 2's
@@ -22,7 +23,11 @@ errors are correlated from step to step (the navigator's map drift), so its band
 paper presets) or of the held-out set and prints, as a markdown table, the relative state's errors
 after the first 30 % of the frames with ``relative_state(process_noise="poses")`` → ``"physics"``:
 RMS of the position, velocity and attitude error vectors, the angular-rate error's median and
-max, and the mean 12-dim NEES (a time average of one run: indicative, no band).
+max, and the mean 12-dim NEES (a time average of one run: indicative, no band). With ``-S``
+options it compares the default relative state with the one given those options instead.
+
+``-S key=value`` passes an option to :func:`relnav.navigation.state.relative_state` (numbers
+are read as floats), e.g. ``-S drift=map`` or ``-S robust_dof=5``.
 """
 
 from __future__ import annotations
@@ -68,16 +73,26 @@ def simulate_seeds(out: Path, name: str, seeds: int) -> list[Path]:
     return folders
 
 
-def track(folder: Path, options: dict[str, str] | None = None, process_noises=("physics",)):
+def track(
+    folder: Path,
+    options: dict[str, str] | None = None,
+    process_noises=("physics",),
+    state: dict | None = None,
+    variants: list[dict] | None = None,
+):
     """``relnav`` (with ``options``, strings as on the command line) on one sequence and the
-    relative state from its poses, one per ``process_noises`` (a list) or the first alone."""
+    relative state from its poses, one per ``process_noises`` (a list) or the first alone;
+    ``state``: options of ``relative_state``; ``variants``: instead of ``process_noises``, one
+    relative state per dict of ``relative_state`` options."""
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import relative_state
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(folder)
     run = run_sequence(seq, "relnav", **(options or {}))
-    out = [relative_state(run, gt_poses=seq.gt_poses, process_noise=p) for p in process_noises]
+    if variants is None:
+        variants = [{**(state or {}), "process_noise": p} for p in process_noises]
+    out = [relative_state(run, gt_poses=seq.gt_poses, **v) for v in variants]
     return out if len(out) > 1 else out[0]
 
 
@@ -101,14 +116,18 @@ def state_errors(res) -> tuple[float, ...]:
     )
 
 
-def report_compare(out: Path, which: str, opts: dict[str, str]) -> None:
+def report_compare(out: Path, which: str, opts: dict[str, str], state: dict) -> None:
     from nav_suite import simulate_suite
+
+    pair = [{"process_noise": "poses"}, {"process_noise": "physics"}]
+    if state:
+        pair = [{}, dict(state)]
 
     pool = holdout() if which == "holdout" else {**suite(), **paper()}
     print("| sequence | position m | velocity mm/s | attitude ° | rate median / max °/s | NEES |")
     print("|---|---|---|---|---|---|")
     for name, folder in simulate_suite(out, list(pool)).items():
-        a, b = (state_errors(r) for r in track(folder, opts, ("poses", "physics")))
+        a, b = (state_errors(r) for r in track(folder, opts, variants=pair))
         print(
             f"| {name} | {a[0]:.3f} → {b[0]:.3f} | {a[1]:.2f} → {b[1]:.2f} | {a[2]:.2f} → "
             f"{b[2]:.2f} | {a[3]:.3f} / {a[4]:.3f} → {b[3]:.3f} / {b[4]:.3f} | {a[5]:.1f} → "
@@ -192,18 +211,31 @@ def main(argv: list[str] | None = None) -> int:
         choices=["suite", "holdout"],
         help="process noise 'poses' → 'physics' on every sequence (one run each)",
     )
+    p.add_argument(
+        "-S", dest="state", action="append", default=[], help="relative_state option key=value"
+    )
     a = p.parse_args(argv)
     opts = dict(kv.split("=", 1) for kv in a.options)
+    state = {k: _value(v) for k, v in (kv.split("=", 1) for kv in a.state)}
     if a.compare:
-        report_compare(a.out, a.compare, opts)
+        report_compare(a.out, a.compare, opts, state)
         return 0
     if a.seeds <= 1:
         for name, folder in simulate_suite(a.out, TUMBLING).items():
-            report_single(name, track(folder, opts))
+            report_single(name, track(folder, opts, state=state))
         return 0
     for name in TUMBLING:
-        report_monte_carlo(name, [track(f, opts) for f in simulate_seeds(a.out, name, a.seeds)])
+        folders = simulate_seeds(a.out, name, a.seeds)
+        report_monte_carlo(name, [track(f, opts, state=state) for f in folders])
     return 0
+
+
+def _value(text: str) -> float | str:
+    """A ``-S`` value: a float when it reads as one, else the string."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 if __name__ == "__main__":

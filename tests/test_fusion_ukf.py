@@ -299,3 +299,33 @@ def test_torque_free_bound_covers_euler_equations(rng: np.random.Generator) -> N
     alpha = (w0 @ w0) / math.sqrt(3.0)
     np.testing.assert_allclose(ukf._phys_process_var(2.0)[9:], (alpha * 2.0) ** 2, rtol=1e-9)
     assert np.all(ukf._phys_process_var(2.0)[:6] == 0.0)
+
+
+def test_student_t_update_down_weights_a_one_off_error_only() -> None:
+    """robust_dof: an innovation the Gaussian expects is used as is; a 10σ one is damped."""
+    R = np.diag([0.01**2] * 3 + [np.radians(0.1) ** 2] * 3)
+
+    def filters() -> tuple[TwistorUKF, TwistorUKF]:
+        out = []
+        for dof in (None, 4.0):
+            p0 = {"position": 1e-3, "velocity": 1e-3, "attitude": 1e-3, "omega": 1e-3}
+            f = TwistorUKF(dt=1.0, r=R, p0=p0, robust_dof=dof)
+            f.initialize([50.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+            f.predict()
+            out.append(f)
+        return out[0], out[1]
+
+    g, t = filters()
+    small = ([50.001, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    ig, it = g.update(*small, R=R), t.update(*small, R=R)
+    np.testing.assert_allclose(t.position, g.position, atol=1e-12)
+    np.testing.assert_allclose(it.meas_cov, ig.meas_cov)
+    g, t = filters()
+    s = math.sqrt(g.covariance[0, 0] + R[0, 0])
+    big = ([50.0 + 10 * s, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    ig, it = g.update(*big, R=R), t.update(*big, R=R)
+    assert it.accepted and abs(t.position[0] - 50.0) < 0.5 * abs(g.position[0] - 50.0)
+    assert np.all(np.diag(it.meas_cov) >= np.diag(ig.meas_cov))
+    assert t.settings()["robust_dof"] == 4.0
+    with pytest.raises(ConfigError):
+        TwistorUKF(robust_dof=0.0)

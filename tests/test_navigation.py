@@ -365,3 +365,62 @@ def test_drift_covariance_maps_the_step_to_the_observation(rng):
     res = SimpleNamespace(info={"information": np.eye(6), "step_covariance": C})
     rec = StateRecord.from_step(SimpleNamespace(status="ok", pose=T, result=res))
     np.testing.assert_array_equal(rec.step_covariance, C)
+
+
+def test_map_drift_shares_follow_the_map_running_mean():
+    """Frame k merged into a map of n frames moves it by 1/min(n, memory) of its error; frames
+    the navigator did not merge do not count."""
+    from types import SimpleNamespace
+
+    from relnav.navigation.state import map_drift_shares
+
+    status = ["first", "ok", "ok", "failed", "ok"] + ["ok"] * 10
+    steps = [SimpleNamespace(status=s) for s in status]
+    g = map_drift_shares(steps, memory=5.0)
+    np.testing.assert_allclose(g[:6], [1.0, 1.0, 1 / 2, 1 / 3, 1 / 3, 1 / 4])
+    np.testing.assert_allclose(g[7:], 1 / 5)  # saturated at the memory
+    assert np.all(map_drift_shares(steps, memory=1.0) == 1.0)  # memory 1: the whole step
+
+
+def test_split_rotation_drift_keeps_both_parts_covariances(rng):
+    """The map's share of a step's rotation (with its lever arm) and the white rest: both
+    positive semi-definite, summing to the step; a translation alone stays with the map."""
+    from relnav.navigation.state import split_rotation_drift
+
+    A = rng.normal(size=(6, 6))
+    Q = A @ A.T
+    for share in (1.0, 0.3, 0.05):
+        bias, white = split_rotation_drift(Q, share)
+        np.testing.assert_allclose(bias + white, Q, atol=1e-12)
+        assert np.linalg.eigvalsh(bias).min() > -1e-9
+        assert np.linalg.eigvalsh(white).min() > -1e-9
+        # the rotation block is split by the share
+        np.testing.assert_allclose(bias[3:, 3:], share * Q[3:, 3:], atol=1e-9)
+    np.testing.assert_allclose(split_rotation_drift(Q, 1.0)[1], 0.0, atol=1e-12)
+    Qt = np.zeros((6, 6))
+    Qt[:3, :3] = Q[:3, :3]
+    np.testing.assert_allclose(split_rotation_drift(Qt, 0.1)[0], Qt, atol=1e-12)
+
+
+def test_relative_state_map_drift_on_a_short_run(tumble_run):
+    """drift="map": the bias takes the map's share of each step's rotation, the rest goes to
+    the observation's white noise; the rate is still recovered and the option is checked."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import StateRecord, relative_state
+
+    seq, run = tumble_run
+    steps = [StateRecord.from_step(s) for s in run.steps]
+    full = relative_state(run, steps=steps, gt_poses=seq.gt_poses)
+    mapd = relative_state(run, steps=steps, gt_poses=seq.gt_poses, drift="map")
+    k0 = len(mapd) // 3
+    err = np.degrees(np.linalg.norm(mapd.errors()["omega"][k0:], axis=1))
+    assert np.median(err) < 0.1 and np.max(err) < 0.2
+    # less freedom for the bias's rotation: the attitude's covariance at the end is smaller
+    assert np.trace(mapd.covariance[-1][6:9, 6:9]) < np.trace(full.covariance[-1][6:9, 6:9])
+    # memory 1 is the whole step: the default model
+    one = relative_state(run, steps=steps, gt_poses=seq.gt_poses, drift="map", map_memory=1.0)
+    np.testing.assert_allclose(one.covariance[-1], full.covariance[-1], rtol=1e-6, atol=1e-15)
+    with pytest.raises(ConfigError):
+        relative_state(run, steps=steps, drift="share")
+    with pytest.raises(ConfigError):
+        relative_state(run, steps=steps, drift="map", map_memory=0.5)

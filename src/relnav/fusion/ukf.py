@@ -168,6 +168,17 @@ class TwistorUKF(PoseFilter):
         the model in its own axes; a quarter turn later that shift is seen along another
         sensor axis). The drift's position block (given in sensor axes) is rotated into body
         axes with the current attitude estimate.
+    robust_dof : float, optional
+        **[interpretation, not in Paper 2]** A Student-t measurement with ``robust_dof``
+        degrees of freedom instead of a Gaussian (default None: Gaussian): before each update
+        the measurement covariance is multiplied by ``s ≥ 1`` (:meth:`_student_scale`), so a
+        one-off registration error far outside its covariance moves the state less. Measured
+        on envisat-tumble-64 (20 noise seeds, ``relnav.navigation.state.relative_state``,
+        after the first 30 % of the frames), dof 5: rate error median/p95/max 0.027/0.069/
+        0.172 → 0.028/0.072/0.180 deg/s, 12-dim NEES 5.2 → 5.4, RMS attitude 3.54 → 3.76°;
+        with ``drift="map"`` 0.028/0.069/0.172 → 0.028/0.071/0.168, 5.9 → 5.7. No gain: the
+        worst rate errors come from views (steps 116–117) whose scans already report a weak
+        axis (rotation σ 0.5° about y), so their errors are not outliers of the covariance.
 
     Examples
     --------
@@ -206,7 +217,13 @@ class TwistorUKF(PoseFilter):
         axis_sigma: float = 1e-3,
         observer_bias: bool = False,
         bias_frame: Literal["sensor", "body"] = "sensor",
+        robust_dof: float | None = None,
     ) -> None:
+        if robust_dof is not None and not (
+            math.isfinite(float(robust_dof)) and float(robust_dof) > 0.0
+        ):
+            raise ConfigError(f"robust_dof must be > 0 or None, got {robust_dof!r}")
+        self.robust_dof = None if robust_dof is None else float(robust_dof)
         self.centre_offset = bool(centre_offset)
         self.observer_bias = bool(observer_bias)
         if bias_frame not in ("sensor", "body"):
@@ -456,6 +473,10 @@ class TwistorUKF(PoseFilter):
         reason = self._gate(nis, nu.size)
         if reason:
             return UpdateInfo(False, nis, nu, reason, Pzz, Rz)
+        if self.robust_dof is not None:
+            A = Pzz - Rz
+            Rz = self._student_scale(A, Rz, nu) * Rz
+            Pzz = _sym(A + Rz)
         K = np.linalg.solve(Pzz, Pxz.T).T
         dx = K @ nu
         P_prior = self._P
@@ -471,6 +492,25 @@ class TwistorUKF(PoseFilter):
         if self.centre_offset:
             self._axis_constraint()
         return UpdateInfo(True, nis, nu, "", Pzz, Rz)
+
+    def _student_scale(self, A: np.ndarray, Rz: np.ndarray, nu: np.ndarray) -> float:
+        """Scale ``s ≥ 1`` of the measurement covariance under a Student-t noise (``ν`` dof).
+
+        **[interpretation]** The variational-Bayes fixed point of a Student-t measurement with
+        the filter's spread ``A``: ``s = (ν + νᵀ(A + s R)⁻¹ν) / (ν + m)`` (``m`` = 6), clipped at
+        1 so that only an innovation larger than the Gaussian expects is down-weighted (a
+        registration error much larger than the scan's own covariance: a one-off, not noise).
+        """
+        dof = float(self.robust_dof)  # type: ignore[arg-type]
+        m = nu.size
+        s = 1.0
+        for _ in range(20):
+            nis = float(nu @ np.linalg.solve(A + s * Rz, nu))
+            s_new = max(1.0, (dof + nis) / (dof + m))
+            if abs(s_new - s) <= 1e-3 * s:
+                return s_new
+            s = s_new
+        return s
 
     def _inject(self, dx: np.ndarray) -> None:
         """Add an error-state correction to the nominal state."""
@@ -512,5 +552,6 @@ class TwistorUKF(PoseFilter):
             centre_offset=self.centre_offset,
             observer_bias=self.observer_bias,
             bias_frame=self.bias_frame,
+            robust_dof=self.robust_dof,
         )
         return out
