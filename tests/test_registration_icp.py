@@ -145,6 +145,25 @@ def test_kdtree_matches_ckdtree():
     assert dk.shape == ik.shape == (5, 3)
 
 
+@pytest.mark.parametrize("n", [1, 7, 3000])
+def test_kd_knn_equals_ckdtree(n):
+    """The numba k-NN (the navigator's map neighbourhoods) gives cKDTree's neighbours and the
+    same distances to the bit; missing neighbours are (inf, -1)."""
+    from relnav.geometry.kdtree import _kd_build, _kd_knn
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3))
+    P[: n // 3] *= 0.01  # uneven density
+    Q = np.concatenate([P[: min(n, 100)], rng.normal(size=(200, 3))])
+    k = 10
+    d, i = _kd_knn(*_kd_build(P, 8), Q, k)
+    m = min(k, n)
+    d_ref, i_ref = cKDTree(P).query(Q, k=m)
+    assert np.array_equal(d[:, :m], d_ref.reshape(len(Q), m))
+    assert np.array_equal(i[:, :m], i_ref.reshape(len(Q), m))
+    assert np.isinf(d[:, m:]).all() and (i[:, m:] == -1).all()
+
+
 def test_small_kernels_match_numpy():
     rng = np.random.default_rng(1)
     A = rng.normal(size=(6, 6))

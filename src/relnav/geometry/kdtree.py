@@ -149,6 +149,99 @@ def _kd_query(
     return X, out_i, out_d
 
 
+@njit(cache=True)
+def _kd_knn(
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    Q: np.ndarray,
+    k: int,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """The ``k`` nearest points of every ``Q[i]`` (exact), nearest first.
+
+    Returns ``(dist, idx)``, both ``(len(Q), k)``: distances (inf: fewer than ``k`` points) and
+    original indices (-1: none). Squared distances are summed over the axes in order and the
+    root taken last, as :class:`scipy.spatial.cKDTree` does, so the distances are the same
+    numbers. A node is skipped when its cell is farther than the ``k``-th best so far (the
+    cell's distance is kept per axis as the search descends).
+    """
+    n = Pp.shape[0]
+    m = Q.shape[0]
+    out_d = np.full((m, k), np.inf)
+    out_i = np.full((m, k), -1, np.int64)
+    if k <= 0:
+        return out_d, out_i
+    cap = 128
+    st_n = np.empty(cap, np.int64)
+    st_s = np.empty(cap, np.int64)
+    st_e = np.empty(cap, np.int64)
+    st_lb = np.empty(cap)
+    st_off = np.empty((cap, 3))
+    bd = np.empty(k)
+    bk = np.empty(k, np.int64)
+    n_nodes = split_dim.shape[0]
+    for qi in range(m):
+        q0, q1, q2 = Q[qi, 0], Q[qi, 1], Q[qi, 2]
+        found = 0
+        bound = np.inf  # squared distance of the k-th best so far
+        st_n[0], st_s[0], st_e[0], st_lb[0] = 0, 0, n, 0.0
+        st_off[0, 0] = st_off[0, 1] = st_off[0, 2] = 0.0
+        top = 1
+        while top > 0:
+            top -= 1
+            lb = st_lb[top]
+            if lb >= bound:
+                continue
+            node, s, e = st_n[top], st_s[top], st_e[top]
+            dim = split_dim[node] if node < n_nodes else -1
+            if dim < 0:
+                for kk in range(s, e):
+                    d0 = Pp[kk, 0] - q0
+                    d1 = Pp[kk, 1] - q1
+                    d2 = Pp[kk, 2] - q2
+                    dd = d0 * d0 + d1 * d1 + d2 * d2
+                    if found == k and dd >= bound:
+                        continue
+                    # insert into the sorted list (a later equal distance goes after)
+                    j = found if found < k else k - 1
+                    while j > 0 and bd[j - 1] > dd:
+                        bd[j] = bd[j - 1]
+                        bk[j] = bk[j - 1]
+                        j -= 1
+                    bd[j] = dd
+                    bk[j] = kk
+                    if found < k:
+                        found += 1
+                    if found == k:
+                        bound = bd[k - 1]
+                continue
+            mid = (s + e) // 2
+            qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
+            diff = qv - split_val[node]
+            o0, o1, o2 = st_off[top, 0], st_off[top, 1], st_off[top, 2]
+            old = o0 if dim == 0 else (o1 if dim == 1 else o2)
+            far_lb = lb - old * old + diff * diff
+            if diff < 0.0:
+                near_n, near_s, near_e = 2 * node + 1, s, mid
+                far_n, far_s, far_e = 2 * node + 2, mid, e
+            else:
+                near_n, near_s, near_e = 2 * node + 2, mid, e
+                far_n, far_s, far_e = 2 * node + 1, s, mid
+            if far_lb < bound:
+                st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, far_lb
+                st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2
+                st_off[top, dim] = diff
+                top += 1
+            st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, lb
+            st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2
+            top += 1
+        for j in range(found):
+            out_d[qi, j] = math.sqrt(bd[j])
+            out_i[qi, j] = perm[bk[j]]
+    return out_d, out_i
+
+
 class KDTree:
     """Static 3-D KD-tree in numba: exact nearest neighbour within an optional distance bound.
 
