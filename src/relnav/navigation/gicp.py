@@ -100,8 +100,9 @@ def _accumulate(
     sw = 0.0
     swd = 0.0
     d2_out = np.full(X.shape[0], -1.0)
-    J = np.zeros((3, 6))
     OJ = np.zeros((3, 6))
+    # J = [I, -[x]x] has zeros and ones: its products are written out, in the order of the
+    # full 3x6 products, so that every sum is the same number (a term 0·y or 1·y is exact)
     for i in range(X.shape[0]):
         j = idx[i]
         if j < 0:
@@ -109,10 +110,12 @@ def _accumulate(
         e0 = X[i, 0] - M[j, 0]
         e1 = X[i, 1] - M[j, 1]
         e2 = X[i, 2] - M[j, 2]
-        O = Om[j]
-        Oe0 = O[0, 0] * e0 + O[0, 1] * e1 + O[0, 2] * e2
-        Oe1 = O[1, 0] * e0 + O[1, 1] * e1 + O[1, 2] * e2
-        Oe2 = O[2, 0] * e0 + O[2, 1] * e1 + O[2, 2] * e2
+        O00, O01, O02 = Om[j, 0, 0], Om[j, 0, 1], Om[j, 0, 2]
+        O10, O11, O12 = Om[j, 1, 0], Om[j, 1, 1], Om[j, 1, 2]
+        O20, O21, O22 = Om[j, 2, 0], Om[j, 2, 1], Om[j, 2, 2]
+        Oe0 = O00 * e0 + O01 * e1 + O02 * e2
+        Oe1 = O10 * e0 + O11 * e1 + O12 * e2
+        Oe2 = O20 * e0 + O21 * e1 + O22 * e2
         d2 = e0 * Oe0 + e1 * Oe1 + e2 * Oe2
         d2_out[i] = d2
         q = c2 / (c2 + d2)
@@ -121,21 +124,33 @@ def _accumulate(
         sw += w
         swd += w * d2
         x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
-        # J = [I, -[x]x]
-        for a in range(3):
-            for b in range(6):
-                J[a, b] = 0.0
-        J[0, 0] = J[1, 1] = J[2, 2] = 1.0
-        J[0, 4], J[0, 5] = x2, -x1
-        J[1, 3], J[1, 5] = -x2, x0
-        J[2, 3], J[2, 4] = x1, -x0
-        for a in range(3):
-            for b in range(6):
-                OJ[a, b] = O[a, 0] * J[0, b] + O[a, 1] * J[1, b] + O[a, 2] * J[2, b]
-        for p in range(6):
-            g[p] += w * (J[0, p] * Oe0 + J[1, p] * Oe1 + J[2, p] * Oe2)
-            for r in range(p, 6):
-                H[p, r] += w * (J[0, p] * OJ[0, r] + J[1, p] * OJ[1, r] + J[2, p] * OJ[2, r])
+        # OJ = Ω J, columns [I | (0, -x2, x1), (x2, 0, -x0), (-x1, x0, 0)]
+        for a, (oa0, oa1, oa2) in enumerate(((O00, O01, O02), (O10, O11, O12), (O20, O21, O22))):
+            OJ[a, 0] = oa0
+            OJ[a, 1] = oa1
+            OJ[a, 2] = oa2
+            OJ[a, 3] = oa1 * (-x2) + oa2 * x1
+            OJ[a, 4] = oa0 * x2 + oa2 * (-x0)
+            OJ[a, 5] = oa0 * (-x1) + oa1 * x0
+        g[0] += w * Oe0
+        g[1] += w * Oe1
+        g[2] += w * Oe2
+        g[3] += w * ((-x2) * Oe1 + x1 * Oe2)
+        g[4] += w * (x2 * Oe0 + (-x0) * Oe2)
+        g[5] += w * ((-x1) * Oe0 + x0 * Oe1)
+        for r in range(6):
+            c0, c1, c2_ = OJ[0, r], OJ[1, r], OJ[2, r]
+            H[0, r] += w * c0
+            if r >= 1:
+                H[1, r] += w * c1
+            if r >= 2:
+                H[2, r] += w * c2_
+            if r >= 3:
+                H[3, r] += w * ((-x2) * c1 + x1 * c2_)
+            if r >= 4:
+                H[4, r] += w * (x2 * c0 + (-x0) * c2_)
+            if r >= 5:
+                H[5, r] += w * ((-x1) * c0 + x0 * c1)
     for p in range(6):
         for r in range(p):
             H[p, r] = H[r, p]

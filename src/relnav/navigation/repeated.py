@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from relnav.geometry.kdtree import KDTree
 from relnav.navigation.gicp import ScanToMapFit
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -78,7 +79,7 @@ class RepeatedPoints:
         self.same_rays = False
         self.ray_fraction = float("nan")
         self.misses = 0  # tested frames in a row without repeated points
-        self._rays: cKDTree | None = None
+        self._rays: KDTree | None = None
         self._cloud: tuple[np.ndarray, np.ndarray, int] | None = None
         self._tree: tuple[int, cKDTree] | None = None
 
@@ -93,10 +94,10 @@ class RepeatedPoints:
         if self._rays is not None and len(P):
             rng = float(np.median(np.linalg.norm(P, axis=1)))
             eps = 0.01 * self.nav.spacing0 / max(rng, 1e-12)
-            d, _ = self._rays.query(u, distance_upper_bound=eps)
-            self.ray_fraction = float(np.count_nonzero(np.isfinite(d))) / len(P)
+            _, j, _ = self._rays.nn(u, eps)
+            self.ray_fraction = float(np.count_nonzero(j >= 0)) / len(P)
             self.same_rays = self.ray_fraction >= RAY_FRACTION
-        self._rays = cKDTree(u) if len(P) else None
+        self._rays = KDTree(u) if len(P) else None
         return self.same_rays
 
     def remember(self, P_full: np.ndarray, pose: np.ndarray, frame: int) -> None:
