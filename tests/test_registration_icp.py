@@ -164,6 +164,24 @@ def test_kd_knn_equals_ckdtree(n):
     assert np.isinf(d[:, m:]).all() and (i[:, m:] == -1).all()
 
 
+@pytest.mark.parametrize("n", [1, 9, 2000])
+def test_kd_build_select_is_kd_build_tree(n):
+    """The quickselect build gives _kd_build's nodes and splits, the same nearest neighbours."""
+    from relnav.geometry.kdtree import _kd_build, _kd_build_select, _kd_knn, _kd_query
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3))
+    P[: n // 3] *= 0.01  # uneven density
+    a, b = _kd_build(P, 8), _kd_build_select(P, 8)
+    assert np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3])
+    assert sorted(b[1]) == list(range(n)) and np.array_equal(b[0], P[b[1]])
+    Q = rng.normal(size=(500, 3))
+    na, nb = _kd_query(*a, Q, np.eye(4), 0.5, False), _kd_query(*b, Q, np.eye(4), 0.5, False)
+    assert all(np.array_equal(x, y) for x, y in zip(na, nb, strict=True))
+    ka, kb = _kd_knn(*a, Q, 5), _kd_knn(*b, Q, 5)
+    assert all(np.array_equal(x, y) for x, y in zip(ka, kb, strict=True))
+
+
 def test_small_kernels_match_numpy():
     rng = np.random.default_rng(1)
     A = rng.normal(size=(6, 6))

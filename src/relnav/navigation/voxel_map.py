@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
-from relnav.geometry.kdtree import _kd_build, _kd_knn
+from relnav.geometry.kdtree import _kd_build_select, _kd_knn
 
 log = logging.getLogger(__name__)
 
@@ -409,11 +409,11 @@ class VoxelMap:
         n_recent = n - self._n_main
         if self._main_nb is None or self._n_main == 0 or n_recent > self.rebuild_fraction * n:
             self._n_main = n
-            self._main_nb = _kd_build(mu, 8)
+            self._main_nb = _kd_build_select(mu, 8)
         start = self._n_main
         recent = np.ascontiguousarray(mu[start:]) if n > start else _FAR
         ids = np.arange(start, n, dtype=np.int64) if n > start else np.array([-1], np.int64)
-        self._recent_nb = (*_kd_build(recent, 8), ids)
+        self._recent_nb = (*_kd_build_select(recent, 8), ids)
         touched = np.fromiter(self._touched, dtype=np.int64, count=len(self._touched))
         if len(touched):
             k = min(self.k_neighbors, n)
