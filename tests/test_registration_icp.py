@@ -162,6 +162,14 @@ def test_kd_knn_equals_ckdtree(n):
     assert np.array_equal(d[:, :m], d_ref.reshape(len(Q), m))
     assert np.array_equal(i[:, :m], i_ref.reshape(len(Q), m))
     assert np.isinf(d[:, m:]).all() and (i[:, m:] == -1).all()
+    # within a bound: the same list cut where the distance reaches the bound
+    from relnav.geometry.kdtree import _kd_knn_within
+
+    bound = np.full(len(Q), 0.3)
+    dw, iw = _kd_knn_within(*_kd_build(P, 8), Q, k, bound**2)
+    keep = d < bound[:, None]
+    assert np.array_equal(np.where(keep, d, np.inf), dw)
+    assert np.array_equal(np.where(keep, i, -1), iw)
 
 
 @pytest.mark.parametrize("n", [1, 9, 2000])

@@ -250,6 +250,20 @@ def _kd_knn(
     numbers. A node is skipped when its cell is farther than the ``k``-th best so far (the
     cell's distance is kept per axis as the search descends).
     """
+    return _kd_knn_within(Pp, perm, split_dim, split_val, Q, k, np.full(Q.shape[0], np.inf))
+
+
+@njit(cache=True)
+def _kd_knn_within(
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    Q: np.ndarray,
+    k: int,
+    bound2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """:func:`_kd_knn` among the points strictly closer to ``Q[i]`` than ``√bound2[i]``."""
     n = Pp.shape[0]
     m = Q.shape[0]
     out_d = np.full((m, k), np.inf)
@@ -268,7 +282,7 @@ def _kd_knn(
     for qi in range(m):
         q0, q1, q2 = Q[qi, 0], Q[qi, 1], Q[qi, 2]
         found = 0
-        bound = np.inf  # squared distance of the k-th best so far
+        bound = bound2[qi]  # squared distance of the k-th best so far
         st_n[0], st_s[0], st_e[0], st_lb[0] = 0, 0, n, 0.0
         st_off[0, 0] = st_off[0, 1] = st_off[0, 2] = 0.0
         top = 1
@@ -285,7 +299,7 @@ def _kd_knn(
                     d1 = Pp[kk, 1] - q1
                     d2 = Pp[kk, 2] - q2
                     dd = d0 * d0 + d1 * d1 + d2 * d2
-                    if found == k and dd >= bound:
+                    if dd >= bound:
                         continue
                     # insert into the sorted list (a later equal distance goes after)
                     j = found if found < k else k - 1

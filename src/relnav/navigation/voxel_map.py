@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
-from relnav.geometry.kdtree import _kd_build_select, _kd_knn
+from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
 
 log = logging.getLogger(__name__)
 
@@ -132,12 +132,19 @@ def _map_knn(
 ) -> np.ndarray:  # pragma: no cover - numba
     """Map indices of the ``k`` nearest map points of each ``Q[i]`` over the main and the recent
     search trees (:attr:`VoxelMap.search_trees`; ``n_main``, ``n_recent``: their point counts),
-    nearest first (``-1``: fewer than ``k``)."""
+    nearest first (``-1``: fewer than ``k``). The recent tree is searched only closer than the
+    main tree's ``k``-th (a point there as far or farther would not be kept)."""
     mp, mperm, mdim, mval = main
     rp, rperm, rdim, rval, rids = recent
     d_a, i_a = _kd_knn(mp, mperm, mdim, mval, Q, min(k, n_main))
     if n_recent > 0:
-        d_b, i_b = _kd_knn(rp, rperm, rdim, rval, Q, min(k, n_recent))
+        bound2 = np.full(Q.shape[0], np.inf)
+        if d_a.shape[1] == k:
+            for i in range(Q.shape[0]):
+                if i_a[i, k - 1] >= 0:
+                    # a hair above d²: the merge, not the bound, decides at a tie
+                    bound2[i] = d_a[i, k - 1] * d_a[i, k - 1] * (1.0 + 1e-12)
+        d_b, i_b = _kd_knn_within(rp, rperm, rdim, rval, Q, min(k, n_recent), bound2)
         for i in range(i_b.shape[0]):
             for j in range(i_b.shape[1]):
                 if i_b[i, j] >= 0:
