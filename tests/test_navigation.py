@@ -424,3 +424,38 @@ def test_relative_state_map_drift_on_a_short_run(tumble_run):
         relative_state(run, steps=steps, drift="share")
     with pytest.raises(ConfigError):
         relative_state(run, steps=steps, drift="map", map_memory=0.5)
+
+
+def test_nearest_map_point_search_reuses_neighbours_exactly(rng):
+    """The solver's nearest-map-point search skips a point whose neighbour provably did not
+    change: over a converging sequence of poses its answers equal fresh searches and brute
+    force (main and recent trees, the gate)."""
+    from relnav.navigation.gicp import _nearest, _new_cache
+
+    m = VoxelMap(0.05)
+    surf = rng.normal(size=(3000, 3))
+    surf /= np.linalg.norm(surf, axis=1)[:, None]
+    m.insert(surf[:2700], frame=0)
+    _ = m.means  # main tree over the first points
+    m.insert(surf[2700:] * 1.01, frame=1)  # the recent tree
+    trees = m.search_trees
+    main, recent = trees[0], trees[4]
+    assert len(main) > 1000 and len(recent) > 100
+    P = surf[::7] * 1.02 + rng.normal(scale=0.01, size=surf[::7].shape)
+    gate = 0.08
+    cache = _new_cache(len(P))
+    xi = np.r_[0.05, -0.03, 0.02, 0.03, 0.01, -0.02]
+    for k in range(12):
+        T = exp_se3(xi * 0.5**k)
+        X, idx = _nearest(P, T, trees, gate, cache)
+        _, fresh = _nearest(P, T, trees, gate, _new_cache(len(P)))
+        np.testing.assert_array_equal(idx, fresh)
+        # brute force over the trees' points: main first, a recent point only if closer
+        d_main = np.linalg.norm(X[:, None] - main[None], axis=2)
+        d_rec = np.linalg.norm(X[:, None] - recent[None], axis=2)
+        jm, jr = d_main.argmin(1), d_rec.argmin(1)
+        dm, dr = d_main.min(1), d_rec.min(1)
+        ref = np.where(dm < gate, trees[1][jm], -1)
+        ref = np.where((dr < gate) & (dr < dm), trees[8][trees[5][jr]], ref)
+        np.testing.assert_array_equal(idx, ref)
+    assert (cache[3] >= 0).mean() > 0.5  # most points have a neighbour to reuse

@@ -145,6 +145,51 @@ def test_kdtree_matches_ckdtree():
     assert dk.shape == ik.shape == (5, 3)
 
 
+@pytest.mark.parametrize("n", [1, 7, 3000])
+def test_kd_knn_equals_ckdtree(n):
+    """The numba k-NN (the navigator's map neighbourhoods) gives cKDTree's neighbours and the
+    same distances to the bit; missing neighbours are (inf, -1)."""
+    from relnav.geometry.kdtree import _kd_build, _kd_knn
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3))
+    P[: n // 3] *= 0.01  # uneven density
+    Q = np.concatenate([P[: min(n, 100)], rng.normal(size=(200, 3))])
+    k = 10
+    d, i = _kd_knn(*_kd_build(P, 8), Q, k)
+    m = min(k, n)
+    d_ref, i_ref = cKDTree(P).query(Q, k=m)
+    assert np.array_equal(d[:, :m], d_ref.reshape(len(Q), m))
+    assert np.array_equal(i[:, :m], i_ref.reshape(len(Q), m))
+    assert np.isinf(d[:, m:]).all() and (i[:, m:] == -1).all()
+    # within a bound: the same list cut where the distance reaches the bound
+    from relnav.geometry.kdtree import _kd_knn_within
+
+    bound = np.full(len(Q), 0.3)
+    dw, iw = _kd_knn_within(*_kd_build(P, 8), Q, k, bound**2)
+    keep = d < bound[:, None]
+    assert np.array_equal(np.where(keep, d, np.inf), dw)
+    assert np.array_equal(np.where(keep, i, -1), iw)
+
+
+@pytest.mark.parametrize("n", [1, 9, 2000])
+def test_kd_build_select_is_kd_build_tree(n):
+    """The quickselect build gives _kd_build's nodes and splits, the same nearest neighbours."""
+    from relnav.geometry.kdtree import _kd_build, _kd_build_select, _kd_knn, _kd_query
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3))
+    P[: n // 3] *= 0.01  # uneven density
+    a, b = _kd_build(P, 8), _kd_build_select(P, 8)
+    assert np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3])
+    assert sorted(b[1]) == list(range(n)) and np.array_equal(b[0], P[b[1]])
+    Q = rng.normal(size=(500, 3))
+    na, nb = _kd_query(*a, Q, np.eye(4), 0.5, False), _kd_query(*b, Q, np.eye(4), 0.5, False)
+    assert all(np.array_equal(x, y) for x, y in zip(na, nb, strict=True))
+    ka, kb = _kd_knn(*a, Q, 5), _kd_knn(*b, Q, 5)
+    assert all(np.array_equal(x, y) for x, y in zip(ka, kb, strict=True))
+
+
 def test_small_kernels_match_numpy():
     rng = np.random.default_rng(1)
     A = rng.normal(size=(6, 6))

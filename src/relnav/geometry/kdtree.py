@@ -78,6 +78,90 @@ def _kd_build(
 
 
 @njit(cache=True)
+def _kd_build_select(
+    P: np.ndarray, leaf_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """:func:`_kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
+    is split by a quickselect of its median instead of a sort.
+
+    A node holds the same points and gets the same split as with :func:`_kd_build` (when the
+    split coordinates are distinct); only the order of the points inside a leaf differs, so a
+    search returns the same neighbours, except that among points at exactly the same distance
+    another may come first.
+    """
+    n = P.shape[0]
+    perm = np.arange(n)
+    depth = 0
+    sz = n
+    while sz > leaf_size:
+        sz = (sz + 1) // 2
+        depth += 1
+    n_nodes = (1 << (depth + 1)) - 1
+    split_dim = np.full(n_nodes, -1, np.int64)
+    split_val = np.zeros(n_nodes)
+    cap = 2 * depth + 8
+    st_n = np.empty(cap, np.int64)
+    st_s = np.empty(cap, np.int64)
+    st_e = np.empty(cap, np.int64)
+    key = np.empty(n)
+    st_n[0], st_s[0], st_e[0] = 0, 0, n
+    top = 1
+    while top > 0:
+        top -= 1
+        node, s, e = st_n[top], st_s[top], st_e[top]
+        if e - s <= leaf_size:
+            continue
+        best_d = 0
+        best_sp = -1.0
+        for d in range(3):
+            lo = np.inf
+            hi = -np.inf
+            for k in range(s, e):
+                v = P[perm[k], d]
+                lo = min(lo, v)
+                hi = max(hi, v)
+            if hi - lo > best_sp:
+                best_sp = hi - lo
+                best_d = d
+        for k in range(s, e):
+            key[k] = P[perm[k], best_d]
+        m = (s + e) // 2
+        # Hoare quickselect: key[s:m] <= key[m] <= key[m+1:e]
+        lo_i, hi_i = s, e - 1
+        while hi_i > lo_i:
+            a, b, c = key[lo_i], key[(lo_i + hi_i) // 2], key[hi_i]
+            pivot = max(min(a, b), min(max(a, b), c))
+            i, j = lo_i, hi_i
+            while i <= j:
+                while key[i] < pivot:
+                    i += 1
+                while key[j] > pivot:
+                    j -= 1
+                if i <= j:
+                    key[i], key[j] = key[j], key[i]
+                    perm[i], perm[j] = perm[j], perm[i]
+                    i += 1
+                    j -= 1
+            if m <= j:
+                hi_i = j
+            elif m >= i:
+                lo_i = i
+            else:
+                break
+        split_dim[node] = best_d
+        split_val[node] = key[m]
+        st_n[top], st_s[top], st_e[top] = 2 * node + 1, s, m
+        top += 1
+        st_n[top], st_s[top], st_e[top] = 2 * node + 2, m, e
+        top += 1
+    Pp = np.empty((n, 3))
+    for k in range(n):
+        for d in range(3):
+            Pp[k, d] = P[perm[k], d]
+    return Pp, perm, split_dim, split_val
+
+
+@njit(cache=True)
 def _kd_query(
     Pp: np.ndarray,
     perm: np.ndarray,
@@ -147,6 +231,113 @@ def _kd_query(
             out_i[qi] = perm[bi]
             out_d[qi] = math.sqrt(best)
     return X, out_i, out_d
+
+
+@njit(cache=True)
+def _kd_knn(
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    Q: np.ndarray,
+    k: int,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """The ``k`` nearest points of every ``Q[i]`` (exact), nearest first.
+
+    Returns ``(dist, idx)``, both ``(len(Q), k)``: distances (inf: fewer than ``k`` points) and
+    original indices (-1: none). Squared distances are summed over the axes in order and the
+    root taken last, as :class:`scipy.spatial.cKDTree` does, so the distances are the same
+    numbers. A node is skipped when its cell is farther than the ``k``-th best so far (the
+    cell's distance is kept per axis as the search descends).
+    """
+    return _kd_knn_within(Pp, perm, split_dim, split_val, Q, k, np.full(Q.shape[0], np.inf))
+
+
+@njit(cache=True)
+def _kd_knn_within(
+    Pp: np.ndarray,
+    perm: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    Q: np.ndarray,
+    k: int,
+    bound2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """:func:`_kd_knn` among the points strictly closer to ``Q[i]`` than ``√bound2[i]``."""
+    n = Pp.shape[0]
+    m = Q.shape[0]
+    out_d = np.full((m, k), np.inf)
+    out_i = np.full((m, k), -1, np.int64)
+    if k <= 0:
+        return out_d, out_i
+    cap = 128
+    st_n = np.empty(cap, np.int64)
+    st_s = np.empty(cap, np.int64)
+    st_e = np.empty(cap, np.int64)
+    st_lb = np.empty(cap)
+    st_off = np.empty((cap, 3))
+    bd = np.empty(k)
+    bk = np.empty(k, np.int64)
+    n_nodes = split_dim.shape[0]
+    for qi in range(m):
+        q0, q1, q2 = Q[qi, 0], Q[qi, 1], Q[qi, 2]
+        found = 0
+        bound = bound2[qi]  # squared distance of the k-th best so far
+        st_n[0], st_s[0], st_e[0], st_lb[0] = 0, 0, n, 0.0
+        st_off[0, 0] = st_off[0, 1] = st_off[0, 2] = 0.0
+        top = 1
+        while top > 0:
+            top -= 1
+            lb = st_lb[top]
+            if lb >= bound:
+                continue
+            node, s, e = st_n[top], st_s[top], st_e[top]
+            dim = split_dim[node] if node < n_nodes else -1
+            if dim < 0:
+                for kk in range(s, e):
+                    d0 = Pp[kk, 0] - q0
+                    d1 = Pp[kk, 1] - q1
+                    d2 = Pp[kk, 2] - q2
+                    dd = d0 * d0 + d1 * d1 + d2 * d2
+                    if dd >= bound:
+                        continue
+                    # insert into the sorted list (a later equal distance goes after)
+                    j = found if found < k else k - 1
+                    while j > 0 and bd[j - 1] > dd:
+                        bd[j] = bd[j - 1]
+                        bk[j] = bk[j - 1]
+                        j -= 1
+                    bd[j] = dd
+                    bk[j] = kk
+                    if found < k:
+                        found += 1
+                    if found == k:
+                        bound = bd[k - 1]
+                continue
+            mid = (s + e) // 2
+            qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
+            diff = qv - split_val[node]
+            o0, o1, o2 = st_off[top, 0], st_off[top, 1], st_off[top, 2]
+            old = o0 if dim == 0 else (o1 if dim == 1 else o2)
+            far_lb = lb - old * old + diff * diff
+            if diff < 0.0:
+                near_n, near_s, near_e = 2 * node + 1, s, mid
+                far_n, far_s, far_e = 2 * node + 2, mid, e
+            else:
+                near_n, near_s, near_e = 2 * node + 2, mid, e
+                far_n, far_s, far_e = 2 * node + 1, s, mid
+            if far_lb < bound:
+                st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, far_lb
+                st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2
+                st_off[top, dim] = diff
+                top += 1
+            st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, lb
+            st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2
+            top += 1
+        for j in range(found):
+            out_d[qi, j] = math.sqrt(bd[j])
+            out_i[qi, j] = perm[bk[j]]
+    return out_d, out_i
 
 
 class KDTree:

@@ -29,7 +29,6 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.icp_kernels import _rodrigues_nb
-from relnav.geometry.kdtree import _kd_query
 from relnav.geometry.lie import _rot_log
 from relnav.geometry.se3 import adjoint
 
@@ -100,8 +99,9 @@ def _accumulate(
     sw = 0.0
     swd = 0.0
     d2_out = np.full(X.shape[0], -1.0)
-    J = np.zeros((3, 6))
     OJ = np.zeros((3, 6))
+    # J = [I, -[x]x] has zeros and ones: its products are written out, in the order of the
+    # full 3x6 products, so that every sum is the same number (a term 0·y or 1·y is exact)
     for i in range(X.shape[0]):
         j = idx[i]
         if j < 0:
@@ -109,10 +109,12 @@ def _accumulate(
         e0 = X[i, 0] - M[j, 0]
         e1 = X[i, 1] - M[j, 1]
         e2 = X[i, 2] - M[j, 2]
-        O = Om[j]
-        Oe0 = O[0, 0] * e0 + O[0, 1] * e1 + O[0, 2] * e2
-        Oe1 = O[1, 0] * e0 + O[1, 1] * e1 + O[1, 2] * e2
-        Oe2 = O[2, 0] * e0 + O[2, 1] * e1 + O[2, 2] * e2
+        O00, O01, O02 = Om[j, 0, 0], Om[j, 0, 1], Om[j, 0, 2]
+        O10, O11, O12 = Om[j, 1, 0], Om[j, 1, 1], Om[j, 1, 2]
+        O20, O21, O22 = Om[j, 2, 0], Om[j, 2, 1], Om[j, 2, 2]
+        Oe0 = O00 * e0 + O01 * e1 + O02 * e2
+        Oe1 = O10 * e0 + O11 * e1 + O12 * e2
+        Oe2 = O20 * e0 + O21 * e1 + O22 * e2
         d2 = e0 * Oe0 + e1 * Oe1 + e2 * Oe2
         d2_out[i] = d2
         q = c2 / (c2 + d2)
@@ -121,21 +123,33 @@ def _accumulate(
         sw += w
         swd += w * d2
         x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
-        # J = [I, -[x]x]
-        for a in range(3):
-            for b in range(6):
-                J[a, b] = 0.0
-        J[0, 0] = J[1, 1] = J[2, 2] = 1.0
-        J[0, 4], J[0, 5] = x2, -x1
-        J[1, 3], J[1, 5] = -x2, x0
-        J[2, 3], J[2, 4] = x1, -x0
-        for a in range(3):
-            for b in range(6):
-                OJ[a, b] = O[a, 0] * J[0, b] + O[a, 1] * J[1, b] + O[a, 2] * J[2, b]
-        for p in range(6):
-            g[p] += w * (J[0, p] * Oe0 + J[1, p] * Oe1 + J[2, p] * Oe2)
-            for r in range(p, 6):
-                H[p, r] += w * (J[0, p] * OJ[0, r] + J[1, p] * OJ[1, r] + J[2, p] * OJ[2, r])
+        # OJ = Ω J, columns [I | (0, -x2, x1), (x2, 0, -x0), (-x1, x0, 0)]
+        for a, (oa0, oa1, oa2) in enumerate(((O00, O01, O02), (O10, O11, O12), (O20, O21, O22))):
+            OJ[a, 0] = oa0
+            OJ[a, 1] = oa1
+            OJ[a, 2] = oa2
+            OJ[a, 3] = oa1 * (-x2) + oa2 * x1
+            OJ[a, 4] = oa0 * x2 + oa2 * (-x0)
+            OJ[a, 5] = oa0 * (-x1) + oa1 * x0
+        g[0] += w * Oe0
+        g[1] += w * Oe1
+        g[2] += w * Oe2
+        g[3] += w * ((-x2) * Oe1 + x1 * Oe2)
+        g[4] += w * (x2 * Oe0 + (-x0) * Oe2)
+        g[5] += w * ((-x1) * Oe0 + x0 * Oe1)
+        for r in range(6):
+            c0, c1, c2_ = OJ[0, r], OJ[1, r], OJ[2, r]
+            H[0, r] += w * c0
+            if r >= 1:
+                H[1, r] += w * c1
+            if r >= 2:
+                H[2, r] += w * c2_
+            if r >= 3:
+                H[3, r] += w * ((-x2) * c1 + x1 * c2_)
+            if r >= 4:
+                H[4, r] += w * (x2 * c0 + (-x0) * c2_)
+            if r >= 5:
+                H[5, r] += w * ((-x1) * c0 + x0 * c1)
     for p in range(6):
         for r in range(p):
             H[p, r] = H[r, p]
@@ -143,18 +157,126 @@ def _accumulate(
 
 
 @njit(cache=True)
+def _two_nearest(
+    Pp: np.ndarray,
+    split_dim: np.ndarray,
+    split_val: np.ndarray,
+    q0: float,
+    q1: float,
+    q2: float,
+    bound: float,
+    st_n: np.ndarray,
+    st_s: np.ndarray,
+    st_e: np.ndarray,
+    st_lb: np.ndarray,
+) -> tuple[float, int, float]:  # pragma: no cover - numba
+    """The two nearest points of ``q`` strictly closer than ``√bound`` in a tree of
+    :func:`relnav.geometry.kdtree._kd_build`: ``(dd1, k1, dd2)``, squared distances summed as
+    :func:`relnav.geometry.kdtree._kd_query` sums them and the permuted index of the nearest
+    (``bound`` and ``-1`` when not found). ``st_*``: the search stack (128 entries)."""
+    b1, b2, k1 = bound, bound, -1
+    n_nodes = split_dim.shape[0]
+    st_n[0], st_s[0], st_e[0], st_lb[0] = 0, 0, Pp.shape[0], 0.0
+    top = 1
+    while top > 0:
+        top -= 1
+        if st_lb[top] >= b2:
+            continue
+        node, s, e = st_n[top], st_s[top], st_e[top]
+        dim = split_dim[node] if node < n_nodes else -1
+        if dim < 0:
+            for k in range(s, e):
+                d0 = Pp[k, 0] - q0
+                d1 = Pp[k, 1] - q1
+                d2 = Pp[k, 2] - q2
+                dd = d0 * d0 + d1 * d1 + d2 * d2
+                if dd < b1:
+                    b2 = b1
+                    b1, k1 = dd, k
+                elif dd < b2:
+                    b2 = dd
+            continue
+        mid = (s + e) // 2
+        qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
+        diff = qv - split_val[node]
+        if diff < 0.0:
+            near_n, near_s, near_e = 2 * node + 1, s, mid
+            far_n, far_s, far_e = 2 * node + 2, mid, e
+        else:
+            near_n, near_s, near_e = 2 * node + 2, mid, e
+            far_n, far_s, far_e = 2 * node + 1, s, mid
+        st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
+        top += 1
+        st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
+        top += 1
+    return b1, k1, b2
+
+
+@njit(cache=True)
 def _nearest(
-    P: np.ndarray, T: np.ndarray, trees: tuple, gate: float
+    P: np.ndarray, T: np.ndarray, trees: tuple, gate: float, cache: tuple
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Transformed points and the nearest map point of each (two trees; -1: none in the gate)."""
+    """Transformed points and the nearest map point of each (two trees; -1: none in the gate).
+
+    The answer is that of two independent nearest-point searches of the trees, the recent
+    tree's point taken only when strictly closer. Each search also finds the distance beyond
+    which every other map point lies (``cache``: :func:`_new_cache`, updated in place), so that
+    a point that moved by ``Δ`` since its last search keeps its neighbour ``c`` without a search
+    when ``|q - c| + Δ`` stays below that distance (by a relative margin of 1e-9, far above
+    rounding): then ``c`` is the unique nearest point, as the searches would find it.
+    """
     mp, mperm, mdim, mval, rp, rperm, rdim, rval, rids = trees
-    X, i_main, d_main = _kd_query(mp, mperm, mdim, mval, P, T, gate, False)
-    _, i_rec, d_rec = _kd_query(rp, rperm, rdim, rval, P, T, gate, False)
-    idx = i_main.copy()
-    for i in range(P.shape[0]):
-        if i_rec[i] >= 0 and d_rec[i] < d_main[i]:
-            idx[i] = rids[i_rec[i]]
+    q_ref, c_pt, lb_other, c_idx = cache
+    m = P.shape[0]
+    X = np.empty((m, 3))
+    idx = np.full(m, -1, np.int64)
+    r2 = gate * gate if gate < np.inf else np.inf
+    st_n = np.empty(128, np.int64)
+    st_s = np.empty(128, np.int64)
+    st_e = np.empty(128, np.int64)
+    st_lb = np.empty(128)
+    for i in range(m):
+        a0, a1, a2 = P[i, 0], P[i, 1], P[i, 2]
+        q0 = T[0, 0] * a0 + T[0, 1] * a1 + T[0, 2] * a2 + T[0, 3]
+        q1 = T[1, 0] * a0 + T[1, 1] * a1 + T[1, 2] * a2 + T[1, 3]
+        q2 = T[2, 0] * a0 + T[2, 1] * a1 + T[2, 2] * a2 + T[2, 3]
+        X[i, 0], X[i, 1], X[i, 2] = q0, q1, q2
+        if c_idx[i] >= 0:
+            d0 = c_pt[i, 0] - q0
+            d1 = c_pt[i, 1] - q1
+            d2 = c_pt[i, 2] - q2
+            dd = d0 * d0 + d1 * d1 + d2 * d2
+            m0, m1, m2 = q0 - q_ref[i, 0], q1 - q_ref[i, 1], q2 - q_ref[i, 2]
+            moved = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            slack = 1e-12 * (1.0 + abs(q0) + abs(q1) + abs(q2))
+            if dd < r2 and (math.sqrt(dd) + moved + slack < math.sqrt(lb_other[i]) * (1.0 - 1e-9)):
+                idx[i] = c_idx[i]
+                continue
+        a_1, ka, a_2 = _two_nearest(mp, mdim, mval, q0, q1, q2, r2, st_n, st_s, st_e, st_lb)
+        b_1, kb, b_2 = _two_nearest(rp, rdim, rval, q0, q1, q2, a_2, st_n, st_s, st_e, st_lb)
+        c_idx[i] = -1
+        if kb >= 0 and (ka < 0 or math.sqrt(b_1) < math.sqrt(a_1)):
+            idx[i] = rids[rperm[kb]]
+            c_pt[i, 0], c_pt[i, 1], c_pt[i, 2] = rp[kb, 0], rp[kb, 1], rp[kb, 2]
+            lb_other[i] = min(a_1, b_2)
+        elif ka >= 0:
+            idx[i] = mperm[ka]
+            c_pt[i, 0], c_pt[i, 1], c_pt[i, 2] = mp[ka, 0], mp[ka, 1], mp[ka, 2]
+            lb_other[i] = min(a_2, b_1)
+        else:
+            continue
+        if idx[i] >= 0:
+            c_idx[i] = idx[i]
+            q_ref[i, 0], q_ref[i, 1], q_ref[i, 2] = q0, q1, q2
     return X, idx
+
+
+@njit(cache=True)
+def _new_cache(m: int) -> tuple:  # pragma: no cover - numba
+    """Per-point state of :func:`_nearest` for ``m`` scan points: the query position at the
+    last search, the neighbour's coordinates in its tree, the squared distance below which no
+    other map point lay, the neighbour's map index (-1: search again)."""
+    return (np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m), np.full(m, -1, np.int64))
 
 
 @njit(cache=True)
@@ -177,9 +299,10 @@ def _solve_loop(
     T = T0.copy()
     scale = max(c0, c)
     iters = 0
+    cache = _new_cache(P.shape[0])
     for it in range(max_iter):
         iters = it + 1
-        X, idx = _nearest(P, T, trees, gate)
+        X, idx = _nearest(P, T, trees, gate, cache)
         H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale)
         xi = _prior_twist(T, T_pred)
         A = H + Lam
@@ -203,7 +326,7 @@ def _solve_loop(
         dr = math.sqrt(delta[3] ** 2 + delta[4] ** 2 + delta[5] ** 2)
         if annealed and dt < tol_t and dr < tol_r:
             break
-    X, idx = _nearest(P, T, trees, gate)
+    X, idx = _nearest(P, T, trees, gate, cache)
     H, g, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c * c)
     return T, H, n_pairs, iters, sw, swd, d2, idx
 

@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from relnav.geometry.kdtree import _kd_build_select, _kd_query
 from relnav.navigation.gicp import ScanToMapFit
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -60,6 +61,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["PATIENCE", "RAY_FRACTION", "RETEST", "RepeatedPoints"]
 
 RAY_FRACTION = 0.2
+_EYE = np.eye(4)
 PATIENCE = 3
 RETEST = 10
 
@@ -78,7 +80,7 @@ class RepeatedPoints:
         self.same_rays = False
         self.ray_fraction = float("nan")
         self.misses = 0  # tested frames in a row without repeated points
-        self._rays: cKDTree | None = None
+        self._rays: tuple[np.ndarray, ...] | None = None  # numba KD-tree of the directions
         self._cloud: tuple[np.ndarray, np.ndarray, int] | None = None
         self._tree: tuple[int, cKDTree] | None = None
 
@@ -93,10 +95,10 @@ class RepeatedPoints:
         if self._rays is not None and len(P):
             rng = float(np.median(np.linalg.norm(P, axis=1)))
             eps = 0.01 * self.nav.spacing0 / max(rng, 1e-12)
-            d, _ = self._rays.query(u, distance_upper_bound=eps)
-            self.ray_fraction = float(np.count_nonzero(np.isfinite(d))) / len(P)
+            _, j, _ = _kd_query(*self._rays, u, _EYE, eps, False)
+            self.ray_fraction = float(np.count_nonzero(j >= 0)) / len(P)
             self.same_rays = self.ray_fraction >= RAY_FRACTION
-        self._rays = cKDTree(u) if len(P) else None
+        self._rays = _kd_build_select(np.ascontiguousarray(u), 16) if len(P) else None
         return self.same_rays
 
     def remember(self, P_full: np.ndarray, pose: np.ndarray, frame: int) -> None:

@@ -12,7 +12,9 @@ point is pulled onto the surface, not onto the sample positions of earlier scans
 **Search structure.** A KD-tree over all points is rebuilt only when the points added since the
 last rebuild exceed a fraction of the map (``rebuild_fraction``); the recent points have a small
 tree of their own, rebuilt each frame, and a query takes the closer of the two answers. Only the
-points of the voxels an update touched get their information recomputed. The cost of a frame is
+points of the voxels an update touched get their information recomputed, their ``k`` neighbours
+found in the same two numba trees (:func:`relnav.geometry.kdtree._kd_knn`: the same neighbours and
+distances as ``cKDTree``, without building a second pair of trees). The cost of a frame is
 therefore about linear in the scan size, not in the map size.
 
 The map is bounded: above ``max_voxels`` the least recently seen voxels are dropped.
@@ -24,10 +26,9 @@ import logging
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
-from relnav.geometry.kdtree import _kd_build
+from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
 
 log = logging.getLogger(__name__)
 
@@ -125,16 +126,33 @@ def _merge_knn(
     return out
 
 
-def _knn(tree: cKDTree, Q: np.ndarray, k: int, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(distances, map indices)`` of the ``k`` nearest tree points, shaped ``(len(Q), k)``."""
-    k = min(k, tree.n)
-    d, i = tree.query(Q, k=k)
-    d = np.asarray(d, dtype=np.float64).reshape(len(Q), k)
-    i = np.asarray(i, dtype=np.int64).reshape(len(Q), k)
-    ok = np.isfinite(d)
-    out = np.full_like(i, -1)
-    out[ok] = ids[i[ok]]
-    return d, out
+@njit(cache=True)
+def _map_knn(
+    main: tuple, recent: tuple, Q: np.ndarray, k: int, n_main: int, n_recent: int
+) -> np.ndarray:  # pragma: no cover - numba
+    """Map indices of the ``k`` nearest map points of each ``Q[i]`` over the main and the recent
+    search trees (:attr:`VoxelMap.search_trees`; ``n_main``, ``n_recent``: their point counts),
+    nearest first (``-1``: fewer than ``k``). The recent tree is searched only closer than the
+    main tree's ``k``-th (a point there as far or farther would not be kept)."""
+    mp, mperm, mdim, mval = main
+    rp, rperm, rdim, rval, rids = recent
+    d_a, i_a = _kd_knn(mp, mperm, mdim, mval, Q, min(k, n_main))
+    if n_recent > 0:
+        bound2 = np.full(Q.shape[0], np.inf)
+        if d_a.shape[1] == k:
+            for i in range(Q.shape[0]):
+                if i_a[i, k - 1] >= 0:
+                    # a hair above d²: the merge, not the bound, decides at a tie
+                    bound2[i] = d_a[i, k - 1] * d_a[i, k - 1] * (1.0 + 1e-12)
+        d_b, i_b = _kd_knn_within(rp, rperm, rdim, rval, Q, min(k, n_recent), bound2)
+        for i in range(i_b.shape[0]):
+            for j in range(i_b.shape[1]):
+                if i_b[i, j] >= 0:
+                    i_b[i, j] = rids[i_b[i, j]]
+    else:
+        d_b = np.full((Q.shape[0], 1), np.inf)
+        i_b = np.full((Q.shape[0], 1), -1, np.int64)
+    return _merge_knn(d_a, i_a, d_b, i_b, k)
 
 
 def plane_information(
@@ -260,7 +278,6 @@ class VoxelMap:
         self.n = 0
         self._touched: set[int] = set()
         self._n_main = 0  # points [0, n_main) are in the main trees
-        self._main_ckd: cKDTree | None = None
         self._main_nb: tuple[np.ndarray, ...] | None = None
         self._recent_nb: tuple[np.ndarray, ...] | None = None
         self._mean: np.ndarray | None = None
@@ -397,24 +414,17 @@ class VoxelMap:
         n = self.n
         mu = np.ascontiguousarray(self._s1[:n] / np.maximum(self._w[:n], 1e-12)[:, None])
         n_recent = n - self._n_main
-        if self._main_ckd is None or self._n_main == 0 or n_recent > self.rebuild_fraction * n:
+        if self._main_nb is None or self._n_main == 0 or n_recent > self.rebuild_fraction * n:
             self._n_main = n
-            self._main_ckd = cKDTree(mu)
-            self._main_nb = _kd_build(mu, 8)
+            self._main_nb = _kd_build_select(mu, 8)
         start = self._n_main
         recent = np.ascontiguousarray(mu[start:]) if n > start else _FAR
         ids = np.arange(start, n, dtype=np.int64) if n > start else np.array([-1], np.int64)
-        self._recent_nb = (*_kd_build(recent, 8), ids)
+        self._recent_nb = (*_kd_build_select(recent, 8), ids)
         touched = np.fromiter(self._touched, dtype=np.int64, count=len(self._touched))
         if len(touched):
             k = min(self.k_neighbors, n)
-            Q = mu[touched]
-            d_a, i_a = _knn(self._main_ckd, Q, k, np.arange(self._n_main, dtype=np.int64))
-            if n > start:
-                d_b, i_b = _knn(cKDTree(recent), Q, k, ids)
-            else:
-                d_b, i_b = np.full((len(Q), 1), np.inf), np.full((len(Q), 1), -1, np.int64)
-            nb = _merge_knn(d_a, i_a, d_b, i_b, k)
+            nb = _map_knn(self._main_nb, self._recent_nb, mu[touched], k, start, n - start)
             info, nrm = plane_information(
                 mu, nb, self.inplane_sigma, self.noise_floor, self.nonplanar_gain
             )
