@@ -31,8 +31,8 @@ refinement of envisat's first 10 frames (41–50 points of a box) drifts 0.27° 
 from them: those scans favour a smaller rotation rate, which constant-velocity terms cannot
 see. The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
 Cost: one refinement of 0.3–0.7 s on the 64×64 sequences, 0.5–1.7 s at 128×128, 3.9 s on
-sim-eoi (1 500 points per scan), all of it in the window's last frame (2–12 ms per frame over
-the suite's 150–250-frame sequences, 20–65 ms over the 60-frame presets).
+sim-eoi (1 500 points per scan, the former point budget), all of it in the window's last frame
+(2–12 ms per frame over the suite's 150–250-frame sequences, 20–65 ms over the 60-frame presets).
 """
 
 from __future__ import annotations
