@@ -19,76 +19,11 @@ __all__ = ["KDTree"]
 
 
 @njit(cache=True)
-def _kd_build(
-    P: np.ndarray, leaf_size: int
+def _kd_build_impl(
+    P: np.ndarray, leaf_size: int, select: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Implicit balanced KD-tree: node ``k`` covers ``[s, e)`` of the permuted points, children
-    ``2k+1`` (``[s, m)``) and ``2k+2`` (``[m, e)``) with ``m = (s + e) // 2``; split on the axis
-    of largest spread at the median. Returns ``(points_permuted, perm, split_dim, split_val)``
-    (``split_dim = -1`` marks leaves)."""
-    n = P.shape[0]
-    perm = np.arange(n)
-    depth = 0
-    sz = n
-    while sz > leaf_size:
-        sz = (sz + 1) // 2
-        depth += 1
-    n_nodes = (1 << (depth + 1)) - 1
-    split_dim = np.full(n_nodes, -1, np.int64)
-    split_val = np.zeros(n_nodes)
-    cap = 2 * depth + 8
-    st_n = np.empty(cap, np.int64)
-    st_s = np.empty(cap, np.int64)
-    st_e = np.empty(cap, np.int64)
-    st_n[0], st_s[0], st_e[0] = 0, 0, n
-    top = 1
-    while top > 0:
-        top -= 1
-        node, s, e = st_n[top], st_s[top], st_e[top]
-        if e - s <= leaf_size:
-            continue
-        best_d = 0
-        best_sp = -1.0
-        for d in range(3):
-            lo = np.inf
-            hi = -np.inf
-            for k in range(s, e):
-                v = P[perm[k], d]
-                lo = min(lo, v)
-                hi = max(hi, v)
-            if hi - lo > best_sp:
-                best_sp = hi - lo
-                best_d = d
-        sub = perm[s:e].copy()
-        order = np.argsort(P[sub, best_d])
-        for k in range(e - s):
-            perm[s + k] = sub[order[k]]
-        m = (s + e) // 2
-        split_dim[node] = best_d
-        split_val[node] = P[perm[m], best_d]
-        st_n[top], st_s[top], st_e[top] = 2 * node + 1, s, m
-        top += 1
-        st_n[top], st_s[top], st_e[top] = 2 * node + 2, m, e
-        top += 1
-    Pp = np.empty((n, 3))
-    for k in range(n):
-        for d in range(3):
-            Pp[k, d] = P[perm[k], d]
-    return Pp, perm, split_dim, split_val
-
-
-@njit(cache=True)
-def _kd_build_select(
-    P: np.ndarray, leaf_size: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """:func:`_kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
-    is split by a quickselect of its median instead of a sort.
-
-    A node holds the same points and gets the same split as with :func:`_kd_build` (when the
-    split coordinates are distinct); only the order of the points inside a leaf differs, so a
-    search returns the same neighbours, except that among points at exactly the same distance
-    another may come first.
-    """
+    """The tree of :func:`_kd_build`; each node's points are ordered about its median by a sort
+    (``select=False``) or by a quickselect (``select=True``, :func:`_kd_build_select`)."""
     n = P.shape[0]
     perm = np.arange(n)
     depth = 0
@@ -123,33 +58,19 @@ def _kd_build_select(
             if hi - lo > best_sp:
                 best_sp = hi - lo
                 best_d = d
-        for k in range(s, e):
-            key[k] = P[perm[k], best_d]
         m = (s + e) // 2
-        # Hoare quickselect: key[s:m] <= key[m] <= key[m+1:e]
-        lo_i, hi_i = s, e - 1
-        while hi_i > lo_i:
-            a, b, c = key[lo_i], key[(lo_i + hi_i) // 2], key[hi_i]
-            pivot = max(min(a, b), min(max(a, b), c))
-            i, j = lo_i, hi_i
-            while i <= j:
-                while key[i] < pivot:
-                    i += 1
-                while key[j] > pivot:
-                    j -= 1
-                if i <= j:
-                    key[i], key[j] = key[j], key[i]
-                    perm[i], perm[j] = perm[j], perm[i]
-                    i += 1
-                    j -= 1
-            if m <= j:
-                hi_i = j
-            elif m >= i:
-                lo_i = i
-            else:
-                break
+        if select:
+            for k in range(s, e):
+                key[k] = P[perm[k], best_d]
+            _quickselect(key, perm, s, e, m)
+            split_val[node] = key[m]
+        else:
+            sub = perm[s:e].copy()
+            order = np.argsort(P[sub, best_d])
+            for k in range(e - s):
+                perm[s + k] = sub[order[k]]
+            split_val[node] = P[perm[m], best_d]
         split_dim[node] = best_d
-        split_val[node] = key[m]
         st_n[top], st_s[top], st_e[top] = 2 * node + 1, s, m
         top += 1
         st_n[top], st_s[top], st_e[top] = 2 * node + 2, m, e
@@ -159,6 +80,61 @@ def _kd_build_select(
         for d in range(3):
             Pp[k, d] = P[perm[k], d]
     return Pp, perm, split_dim, split_val
+
+
+@njit(cache=True)
+def _quickselect(
+    key: np.ndarray, perm: np.ndarray, s: int, e: int, m: int
+) -> None:  # pragma: no cover - numba
+    """Hoare quickselect of ``key[s:e]`` (``perm`` moved alike) so that
+    ``key[s:m] <= key[m] <= key[m+1:e]``."""
+    lo_i, hi_i = s, e - 1
+    while hi_i > lo_i:
+        a, b, c = key[lo_i], key[(lo_i + hi_i) // 2], key[hi_i]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i, j = lo_i, hi_i
+        while i <= j:
+            while key[i] < pivot:
+                i += 1
+            while key[j] > pivot:
+                j -= 1
+            if i <= j:
+                key[i], key[j] = key[j], key[i]
+                perm[i], perm[j] = perm[j], perm[i]
+                i += 1
+                j -= 1
+        if m <= j:
+            hi_i = j
+        elif m >= i:
+            lo_i = i
+        else:
+            break
+
+
+@njit(cache=True)
+def _kd_build(
+    P: np.ndarray, leaf_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Implicit balanced KD-tree: node ``k`` covers ``[s, e)`` of the permuted points, children
+    ``2k+1`` (``[s, m)``) and ``2k+2`` (``[m, e)``) with ``m = (s + e) // 2``; split on the axis
+    of largest spread at the median. Returns ``(points_permuted, perm, split_dim, split_val)``
+    (``split_dim = -1`` marks leaves)."""
+    return _kd_build_impl(P, leaf_size, False)
+
+
+@njit(cache=True)
+def _kd_build_select(
+    P: np.ndarray, leaf_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """:func:`_kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
+    is split by a quickselect of its median instead of a sort.
+
+    A node holds the same points and gets the same split as with :func:`_kd_build` (when the
+    split coordinates are distinct); only the order of the points inside a leaf differs, so a
+    search returns the same neighbours, except that among points at exactly the same distance
+    another may come first.
+    """
+    return _kd_build_impl(P, leaf_size, True)
 
 
 @njit(cache=True)
