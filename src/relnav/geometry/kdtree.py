@@ -137,6 +137,19 @@ def _kd_build_select(
     return _kd_build_impl(P, leaf_size, True)
 
 
+@njit(cache=True, inline="always")
+def _children(
+    node: int, s: int, e: int, diff: float
+) -> tuple[int, int, int, int, int, int]:  # pragma: no cover - numba
+    """The near and far child of ``node`` (covering ``[s, e)``) for a query ``diff`` from its
+    split: ``(near_node, near_s, near_e, far_node, far_s, far_e)`` (the tree of
+    :func:`_kd_build`)."""
+    mid = (s + e) // 2
+    if diff < 0.0:
+        return 2 * node + 1, s, mid, 2 * node + 2, mid, e
+    return 2 * node + 2, mid, e, 2 * node + 1, s, mid
+
+
 @njit(cache=True)
 def _kd_query(
     Pp: np.ndarray,
@@ -190,15 +203,9 @@ def _kd_query(
                         best = dd
                         bi = k
                 continue
-            mid = (s + e) // 2
             qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
             diff = qv - split_val[node]
-            if diff < 0.0:
-                near_n, near_s, near_e = 2 * node + 1, s, mid
-                far_n, far_s, far_e = 2 * node + 2, mid, e
-            else:
-                near_n, near_s, near_e = 2 * node + 2, mid, e
-                far_n, far_s, far_e = 2 * node + 1, s, mid
+            near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
             st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
             top += 1
             st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
@@ -290,18 +297,12 @@ def _kd_knn_within(
                     if found == k:
                         bound = bd[k - 1]
                 continue
-            mid = (s + e) // 2
             qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
             diff = qv - split_val[node]
             o0, o1, o2 = st_off[top, 0], st_off[top, 1], st_off[top, 2]
             old = o0 if dim == 0 else (o1 if dim == 1 else o2)
             far_lb = lb - old * old + diff * diff
-            if diff < 0.0:
-                near_n, near_s, near_e = 2 * node + 1, s, mid
-                far_n, far_s, far_e = 2 * node + 2, mid, e
-            else:
-                near_n, near_s, near_e = 2 * node + 2, mid, e
-                far_n, far_s, far_e = 2 * node + 1, s, mid
+            near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
             if far_lb < bound:
                 st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, far_lb
                 st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2

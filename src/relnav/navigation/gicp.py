@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.icp_kernels import _rodrigues_nb
+from relnav.geometry.kdtree import _children
 from relnav.geometry.lie import _rot_log
 from relnav.geometry.se3 import adjoint
 
@@ -196,15 +197,9 @@ def _two_nearest(
                 elif dd < b2:
                     b2 = dd
             continue
-        mid = (s + e) // 2
         qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
         diff = qv - split_val[node]
-        if diff < 0.0:
-            near_n, near_s, near_e = 2 * node + 1, s, mid
-            far_n, far_s, far_e = 2 * node + 2, mid, e
-        else:
-            near_n, near_s, near_e = 2 * node + 2, mid, e
-            far_n, far_s, far_e = 2 * node + 1, s, mid
+        near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
         st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
         top += 1
         st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
