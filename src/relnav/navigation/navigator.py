@@ -491,6 +491,10 @@ class Navigator:
             info["symmetry_axis"] = self.symmetry.axis.copy()  # type: ignore[union-attr]
             info["symmetry_ratio"] = self.symmetry.ratio  # type: ignore[union-attr]
             info["symmetry_twist"] = sym.copy()
+            # the registration's correction along the symmetric rotation, in prior σ
+            q = float(sym @ Lam @ sym)
+            xi = log_se3(T @ invert(T_pred))
+            info["symmetry_shift_sigma"] = float(sym @ Lam @ xi) / math.sqrt(q) if q > 0 else 0.0
         info["information"] = H
         info["prior_information"] = Lam
         info.update(
