@@ -56,6 +56,12 @@ from relnav.navigation.options import NavigatorConfig
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
+from relnav.navigation.symmetry import (
+    SymmetryAxis,
+    marginalise_direction,
+    stiffen_prior,
+    symmetry_axis,
+)
 from relnav.navigation.voxel_map import VoxelMap, even_subset
 from relnav.odometry.budget import reduce_to_budget
 from relnav.odometry.odometry import OdometryStep
@@ -121,6 +127,8 @@ class Navigator:
         self._win_due = sorted({c.init_window, c.init_repeat} - {0})
         self._prefix: list[np.ndarray] = []
         self.refinements: list[dict[str, Any]] = []
+        self.symmetry: SymmetryAxis | None = None
+        self._sym_count = 0
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -164,6 +172,7 @@ class Navigator:
         self.n_frames, self._online, self._rescaled = 0, [], False
         self._boot_velocity = (v, P_vv)
         self.loop_closer = None
+        self.symmetry, self._sym_count = None, 0
         self.repeats = RepeatedPoints(self)
         if self.relocalizer is not None:
             self.relocalizer = Relocalizer(self)
@@ -233,6 +242,7 @@ class Navigator:
             Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             self.repeats.remember(self.full_scan, self.pose, self.n_frames)
+            self._update_symmetry()
             timings["map"] = time.perf_counter() - ts
         else:
             self.motion.skip()
@@ -251,6 +261,34 @@ class Navigator:
             n_raw,
             time.perf_counter() - t_start,
         )
+
+    def _update_symmetry(self) -> None:
+        """Test the map for an axis of rotational symmetry every ``symmetry_every`` accepted
+        frames (``symmetry_max_ratio > 0``; :mod:`relnav.navigation.symmetry`)."""
+        c = self.config
+        if c.symmetry_max_ratio <= 0 or self.map is None:
+            return
+        self._sym_count += 1
+        if self._sym_count % max(c.symmetry_every, 1):
+            return
+        found = symmetry_axis(
+            self.map.means,
+            self.map.normals,
+            max_ratio=c.symmetry_max_ratio,
+            min_arc_deg=c.symmetry_min_arc_deg,
+            max_axial_fraction=c.symmetry_max_axial,
+            irls=c.symmetry_irls,
+        )
+        if (found is None) != (self.symmetry is None):
+            log.info(
+                "frame %d: %s",
+                self.n_frames,
+                "no symmetry axis"
+                if found is None
+                else f"symmetry axis {np.round(found.axis, 3)} (ratio {found.ratio:.2e}, "
+                f"{found.arc_deg:.0f}° of arc)",
+            )
+        self.symmetry = found
 
     def _judge_integrity(self, result: RegistrationResult, C: np.ndarray) -> None:
         """Record the step's 1σ (largest translation/rotation axis of its covariance ``C``,
@@ -428,7 +466,9 @@ class Navigator:
         gate = float(max(motion, 2.0 * v))
         timings["prepare"] = time.perf_counter() - ts
         ts = time.perf_counter()
-        fit = self._solve(P, T_pred, Lam, gate, rng, radius)
+        sym = self.symmetry.twist if self.symmetry is not None else None
+        Lam_fit = stiffen_prior(Lam, sym, c.symmetry_gain) if sym is not None else Lam
+        fit = self._solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         recovered = False
         if fit["chi2"] > c.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an
@@ -445,8 +485,17 @@ class Navigator:
                 fit, recovered = alt, True
                 Lam = weak
         timings["register"] = time.perf_counter() - ts
-        T, H = fit["T"], fit["H"]
-        info["information"] = H / fit["var_factor"]
+        T, H = fit["T"], fit["H"] / fit["var_factor"]
+        if sym is not None:  # the symmetric rotation is the motion model's
+            H = marginalise_direction(H, sym)
+            info["symmetry_axis"] = self.symmetry.axis.copy()  # type: ignore[union-attr]
+            info["symmetry_ratio"] = self.symmetry.ratio  # type: ignore[union-attr]
+            info["symmetry_twist"] = sym.copy()
+            # the registration's correction along the symmetric rotation, in prior σ
+            q = float(sym @ Lam @ sym)
+            xi = log_se3(T @ invert(T_pred))
+            info["symmetry_shift_sigma"] = float(sym @ Lam @ xi) / math.sqrt(q) if q > 0 else 0.0
+        info["information"] = H
         info["prior_information"] = Lam
         info.update(
             iterations=fit["iterations"],
@@ -491,7 +540,7 @@ class Navigator:
             )
         cov = None
         try:
-            cov = np.linalg.inv(H / fit["var_factor"] + Lam)
+            cov = np.linalg.inv(H + Lam)
         except np.linalg.LinAlgError:
             cov = None
         return RegistrationResult(
@@ -557,16 +606,19 @@ class Navigator:
         rng: float,
         radius: float,
         primary: bool = True,
+        Lam_fit: np.ndarray | None = None,
     ) -> dict[str, Any]:
         """One registration onto the map and its quality figures (``rng``: the scan's median
         range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
         under the motion model's prior). With ``repeat_refine`` the answer is refined point to
         point when the scan repeats the previous scan's surface points
-        (:mod:`relnav.navigation.repeated`)."""
+        (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the
+        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``)."""
         c = self.config
         assert self.map is not None
-        fit = self.register_on_map(P, self.map.information, T_pred, T_pred, Lam, gate, rng)
-        fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lam, gate, rng, primary)
+        Lf = Lam if Lam_fit is None else Lam_fit
+        fit = self.register_on_map(P, self.map.information, T_pred, T_pred, Lf, gate, rng)
+        fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lf, gate, rng, primary)
         n = len(P)
         if c.information == "normal":
             H_cov = normal_information(

@@ -217,6 +217,57 @@ class NavigatorConfig:
         4.67/0, orion 3.90/0, aura 0.91, envisat 1.63).
     k_neighbors : int
         Map points per patch (normal estimation).
+    symmetry_max_ratio : float
+        Near-symmetric targets (0 = off, the default): every ``symmetry_every`` accepted frames
+        the map (voxel means and normals) is tested for an axis of rotational symmetry
+        (:func:`relnav.navigation.symmetry.symmetry_axis`: mean squared normal displacement
+        over mean squared displacement under a rotation about the best axis at most this,
+        the map covering at least ``symmetry_min_arc_deg`` about it, at most
+        ``symmetry_max_axial`` of its normals within 25° of it). While one is found, the
+        rotation about it (with the translation it implies at the scan's lever arm) is taken
+        from the motion model: the direction is marginalised out of the scan's information
+        passed to the filter, and the prior's information along it is multiplied by
+        ``1 + symmetry_gain`` inside the solver. **[measured]** On the suite
+        (``nav_suite.py --methods relnav -O symmetry_max_ratio=0.009``; APE m / wrong steps,
+        off → on): orion-inclined-64 8.09/14 → 2.31/5 (active on 194 of 200 frames), sim-bennu-
+        resample 9.99/6 → 11.21/7, asteroid-helical-128 0.812 → 0.833, the 14 others
+        identical; no wrong step flagged either way. Orion is chaotic: under 6 neutral
+        perturbations (``nav_weak_directions.py --only orion-inclined-64 --perturb 6``) APE
+        8.09 14.20 4.82 9.00 11.39 7.17 (median 8.54 m, wrong median 13.5) → 2.31 5.68 23.82
+        2.22 5.11 3.35 (median 4.23 m, wrong median 5.0; one run worse than any of the
+        baseline's). The test cannot tell a target the registration fails on from one it
+        tracks: the map's ratio is 3.9–8.7e-3 on orion-inclined-64 but 7–16e-3 on sim-bennu
+        (tracked, 0 wrong) and 6.6–13e-3 on sim-bennu-resample; at 0.03 it fires on sim-orion,
+        sim-bennu and asteroid-helical-128 too, which it then breaks (sim-bennu 0.14 → 2.82 m,
+        17 wrong; sim-orion-resample 31.9/33 → 56.0/59). On sim-orion-resample the motion
+        model does not know the rotation about the axis either (the first frames' velocity
+        along it comes from the same biased registrations), so handing it over makes every
+        step wrong. ``symmetry_gain`` 3 and 30 (ratio 0.009): orion 5.89/8 and 9.02/9, others
+        as with 0; the robust test (``symmetry_irls=3``) at 0.0025: orion 8.72/3,
+        sim-orion 0.076 → 3.04/4, sim-orion-resample 58.5/59, sim-bennu-resample 7.71/34.
+        Held-out (``--holdout``, ratio 0.009, not used to choose): comet-ellipse-64 0.473,
+        voyager-helical-64 14.821, aura-tumble-64 0.635, capsule-ellipse-128 52.416/249 wrong,
+        all identical to off (capsule's map, wrong from the first steps, has ratio 0.11: never
+        declared symmetric). Hence off by default. **[interpretation]** With
+        ``symmetry_gain = 0`` the pose along the rotation is still the registration's (which
+        has the prior inside its least squares); only the filter's covariance along it stops
+        shrinking, so the next priors keep the motion model's uncertainty there. A flag on the
+        registration's correction along the rotation (``info["symmetry_shift_sigma"]``, in
+        prior σ) does not separate the steps: orion-inclined-64's 5 wrong steps 0.05–0.46σ,
+        its right ones median 0.12σ, 95th percentile 0.49σ, max 2.05σ; none added.
+    symmetry_min_arc_deg, symmetry_max_axial : float
+        Guards of that test against partial maps and flat plates.
+    symmetry_gain : float
+        Stiffening of the prior along the symmetric rotation inside the solver (0 = only the
+        filter's information is changed).
+    symmetry_every : int
+        Accepted frames between two symmetry tests of the map.
+    symmetry_irls : int
+        Reweighted passes of the symmetry test (0: plain least squares; see
+        :func:`~relnav.navigation.symmetry.symmetry_axis`). Reweighting separates synthetic
+        shapes better (capsule 5e-4 against an irregular blob's 1.8e-2, plain 9.7e-3 against
+        1.8e-2) but not the suite's maps (robust ratio orion-inclined-64 1.6–2.4e-3,
+        sim-bennu-resample 1.6–2.5e-3, asteroid-helical-128 1.5–3.7e-3).
     repeat_refine : float
         Repeated surface points (0 = off): 1σ (× ``s₀``) of a point-to-point refinement of
         each registration, kept when the scan repeats the previous scan's surface points
@@ -263,6 +314,12 @@ class NavigatorConfig:
     voxel_factor: float = 0.3
     inplane_sigma: float = 3.0
     nonplanar_gain: float = 0.0
+    symmetry_max_ratio: float = 0.0
+    symmetry_min_arc_deg: float = 180.0
+    symmetry_max_axial: float = 0.6
+    symmetry_gain: float = 0.0
+    symmetry_every: int = 5
+    symmetry_irls: int = 0
     k_neighbors: int = 10
     repeat_refine: float = 0.1
     repeat_fraction: float = 0.5
