@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
 from relnav.navigation.navigator import Navigator
@@ -161,3 +162,20 @@ def test_navigator_hands_the_symmetric_rotation_to_the_motion_model():
     for info in seen:
         H, u = info["information"], info["symmetry_twist"]
         assert abs(float(u @ H @ u)) < 1e-8 * np.trace(H)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"symmetry_max_ratio": -1.0},
+        {"symmetry_max_axial": 1.5},
+        {"symmetry_every": 0},
+        {"symmetry_min_arc_deg": 400.0},
+    ],
+)
+def test_bad_symmetry_options_are_one_config_error(bad) -> None:
+    from relnav.errors import ConfigError
+    from relnav.navigation import Navigator
+
+    with pytest.raises(ConfigError, match=next(iter(bad))):
+        Navigator(**bad)
