@@ -508,6 +508,7 @@ def refine_window(nav: Navigator) -> None:
         if c.init_velocity == "refined":
             mot.velocity = v_new
     nav.pose = mot.pose.copy()
+    nav.repeats.remember(nav.full_scan, nav.pose, nav.n_frames)  # the last scan at its new pose
     nav._prefix = [f.pose.copy() for f in frames[:-1]]
     mot.start_smoothing(c.smooth_lag)
     if nav.relocalizer is not None:

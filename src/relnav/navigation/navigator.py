@@ -115,7 +115,7 @@ class Navigator:
         self._f0 = 0
         self._rescaled = False
         self._initial_pose = self.pose.copy()
-        self._boot: list[tuple[np.ndarray, float, int]] | None = (
+        self._boot: list[tuple[np.ndarray, float, int, np.ndarray]] | None = (
             [] if self.config.bootstrap_frames > 0 else None
         )
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
@@ -145,7 +145,7 @@ class Navigator:
         P, _ = reduce_to_budget(P, self.config.max_points, seed=[0, self.n_frames])
         K = self.config.bootstrap_frames
         if self._boot is not None:
-            self._boot.append((P, t, n_raw))
+            self._boot.append((P, t, n_raw, self.full_scan))
         out = self._track(P, t, n_raw, t_start)
         mv.window_step(self, P, t, out)
         out = self._observe_loops(P, out)
@@ -177,7 +177,8 @@ class Navigator:
         if self.relocalizer is not None:
             self.relocalizer = Relocalizer(self)
         out = last
-        for P, t, n_raw in frames:
+        for P, t, n_raw, full in frames:
+            self.full_scan = full  # the frame's own scan for the repeated-point refinement
             out = self._observe_loops(P, self._track(P, t, n_raw, time.perf_counter()))
         self._boot_velocity = None
         return OdometryStep(
