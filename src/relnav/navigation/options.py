@@ -105,6 +105,24 @@ class NavigatorConfig:
         ``step_sigma_r_deg`` and the whole 6×6 ``step_covariance``, body frame).
     protection_k : float
         Multiplier of the step's 1σ in the protection level.
+    stability_check, stability_k : bool, float
+        Stability check (off by default): the scan is registered a second time from the
+        first answer displaced by ``stability_k`` σ along the weakest direction of the answer's
+        information (scan + prior; rotations scaled by the scan's lever arm), the displacement
+        capped at ``stability_cap`` map voxels. When the two answers differ by more than
+        ``stability_gate`` in that information's metric (Mahalanobis distance), the step is
+        not determined by the scan: it is flagged ``degenerate`` and the map is not updated.
+        Recorded per step: ``stability_distance`` (σ) and ``stability_shift`` (m, rad).
+    stability_cap : float
+        Largest displacement of the second start, multiples of the map voxel.
+    stability_gate : float
+        Mahalanobis distance between the two answers above which the step is flagged.
+    stability_kernel : float
+        Scale of the second registration's kernel schedule (``kernel`` and ``kernel_start``).
+    stability_pose : {"prediction", "fit"}
+        Pose of a flagged unstable step: the motion model's prediction (the filter skips the
+        measurement) or the better-fitting of the two answers (lower robust RMS; the filter is
+        updated with it, the map is not).
     relocalise : bool
         Global re-localisation against the map with paper 1's descriptor pipeline when the
         navigator is lost or makes a suspect jump (:mod:`relnav.navigation.relocalize`).
@@ -358,6 +376,13 @@ class NavigatorConfig:
     alert_limit_t: float = 0.0
     alert_limit_r_deg: float = 0.0
     protection_k: float = 3.0
+    stability_check: bool = False
+    stability_k: float = 2.0
+    stability_cap: float = 4.0
+    stability_gate: float = 3.0
+    stability_pose: Literal["prediction", "fit"] = "prediction"
+    stability_kernel: float = 1.0
+    stability_mode: Literal["start", "prior"] = "start"
     information: Literal["full", "normal"] = "full"
     loop_closure: bool = False
     keyframe_every: int = 5
