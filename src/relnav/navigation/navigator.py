@@ -593,7 +593,8 @@ class Navigator:
         answer's information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled
         by the lever arm ``radius`` (m); the start is displaced by ``stability_k`` σ along it,
         at most ``stability_cap`` map voxels (metres of translation, or of arc at ``radius``).
-        The answers' distance is measured in the same information (σ). Returns the
+        The second answer goes through the same point-to-point refinement on repeated points
+        as the first. The answers' distance is measured in the same information (σ). Returns the
         better-fitting answer (lower robust RMS, the first on ties) and whether the distance
         exceeds ``stability_gate``.
         """
@@ -614,6 +615,8 @@ class Navigator:
         alt = self.register_on_map(
             P, self.map.information, T0, T_c, Lam, gate, rng, kernel_scale=c.stability_kernel
         )
+        # the same pipeline as the first answer: refined point to point on repeated points
+        alt, _, _ = self.repeats.apply(P, alt, T_c, Lam, gate, rng, False)
         d = log_se3(alt.T @ invert(fit["T"]))
         dist = math.sqrt(max(float(d @ H_post @ d), 0.0))
         rms_alt = float(math.sqrt(alt.swd / alt.sw)) if alt.sw > 0 else float("inf")
