@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.geometry.lie import log_se3
+from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
 from relnav.navigation.gicp import (
@@ -231,7 +231,11 @@ class Navigator:
                     "frame %d: relocalisation raised %s: %s", self.n_frames, type(e).__name__, e
                 )
         used_prior = result.status != "ok"
-        if result.status == "ok":
+        keep_fit = result.status == "degenerate" and bool(result.info.get("keep_fit"))
+        if keep_fit:  # an unstable step keeps its better-fitting answer; the map is not updated
+            self.motion.update(result.T_target_source, result.info["information"])
+            self.pose = self.motion.pose.copy()
+        elif result.status == "ok":
             if result.info.get("recovered"):
                 st, sr = self._first_sigma
                 self.motion.widen(np.array([st] * 3 + [sr] * 3))
@@ -486,6 +490,12 @@ class Navigator:
                 fit, recovered = alt, True
                 Lam = weak
         timings["register"] = time.perf_counter() - ts
+        unstable = False
+        if c.stability_check and fit["usable"]:
+            ts = time.perf_counter()
+            Lam_s = Lam if recovered else Lam_fit
+            fit, unstable = self._stability(P, fit, T_pred, Lam_s, gate, rng, radius, info)
+            timings["stability"] = time.perf_counter() - ts
         T, H = fit["T"], fit["H"] / fit["var_factor"]
         if sym is not None:  # the symmetric rotation is the motion model's
             H = marginalise_direction(H, sym)
@@ -539,6 +549,14 @@ class Navigator:
                 f"correction inconsistent with the motion model (χ² {fit['chi2']:.1f} > "
                 f"{c.chi2_gate}) and not confirmed under a weak prior",
             )
+        elif unstable:
+            status, message = (
+                "degenerate",
+                f"unstable registration: a second start {info['stability_start_sigma']:.1f}σ "
+                f"along the weakest direction ends {info['stability_distance']:.1f}σ away "
+                f"(> {c.stability_gate})",
+            )
+            info["keep_fit"] = c.stability_pose == "fit"
         cov = None
         try:
             cov = np.linalg.inv(H + Lam)
@@ -558,6 +576,64 @@ class Navigator:
             info=info,
         )
 
+    def _stability(
+        self,
+        P: np.ndarray,
+        fit: dict[str, Any],
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
+        info: dict[str, Any],
+    ) -> tuple[dict[str, Any], bool]:
+        """Register ``P`` again from the answer ``fit`` displaced along its weakest direction.
+
+        **[interpretation]** A step whose answer depends on where the solver starts is not
+        determined by the scan. The weakest direction is the smallest eigenvector of the
+        answer's information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled
+        by the lever arm ``radius`` (m); the start is displaced by ``stability_k`` σ along it,
+        at most ``stability_cap`` map voxels (metres of translation, or of arc at ``radius``).
+        The second answer goes through the same point-to-point refinement on repeated points
+        as the first. The answers' distance is measured in the same information (σ). Returns the
+        better-fitting answer (lower robust RMS, the first on ties) and whether the distance
+        exceeds ``stability_gate``.
+        """
+        c = self.config
+        assert self.map is not None
+        H_post = fit["H"] / fit["var_factor"] + Lam
+        H_post = 0.5 * (H_post + H_post.T)
+        sc = np.array([1.0, 1.0, 1.0, radius, radius, radius])  # y = sc * ξ, metres
+        Hs = H_post / sc[:, None] / sc[None, :]
+        ev, U = np.linalg.eigh(Hs)
+        if not np.all(np.isfinite(ev)) or ev[0] <= 0:
+            return fit, False
+        sig_w = 1.0 / math.sqrt(float(ev[0]))
+        shift = min(c.stability_k * sig_w, c.stability_cap * self.map.voxel_size)
+        xi0 = U[:, 0] * shift / sc
+        T0 = exp_se3(xi0) @ fit["T"]
+        T_c = exp_se3(xi0) @ T_pred if c.stability_mode == "prior" else T_pred
+        alt = self.register_on_map(
+            P, self.map.information, T0, T_c, Lam, gate, rng, kernel_scale=c.stability_kernel
+        )
+        # the same pipeline as the first answer: refined point to point on repeated points
+        alt, _, _ = self.repeats.apply(P, alt, T_c, Lam, gate, rng, False)
+        d = log_se3(alt.T @ invert(fit["T"]))
+        dist = math.sqrt(max(float(d @ H_post @ d), 0.0))
+        rms_alt = float(math.sqrt(alt.swd / alt.sw)) if alt.sw > 0 else float("inf")
+        info.update(
+            stability_distance=dist,
+            stability_start_sigma=shift / sig_w,
+            stability_start=shift,
+            stability_follow=dist / max(math.sqrt(float(xi0 @ H_post @ xi0)), 1e-300),
+            stability_shift=d.copy(),
+            stability_rms=rms_alt,
+        )
+        unstable = dist > c.stability_gate
+        if unstable and rms_alt < fit["rms"]:
+            fit = dict(fit, T=alt.T, rms=rms_alt)
+        return fit, unstable
+
     def _weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
         """Information (left, target frame) of the first frame's weak motion prior."""
         st, sr = self._first_sigma
@@ -572,6 +648,7 @@ class Navigator:
         Lam: np.ndarray,
         gate: float,
         rng: float,
+        kernel_scale: float = 1.0,
     ) -> ScanToMapFit:
         """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
         per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
@@ -590,11 +667,11 @@ class Navigator:
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(Lam),
             gate,
-            float(c.kernel),
+            float(c.kernel) * kernel_scale,
             int(c.max_iter),
             c.tolerance * v,
             c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start),
+            c0=float(c.kernel_start) * kernel_scale,
             decay=float(c.kernel_decay),
         )
 
