@@ -119,3 +119,15 @@ def test_normals_of_plane_point_to_viewpoint(rng):
     assert (n[:, 2] < 0).all()  # oriented towards the origin (sensor)
     n_r = estimate_normals(pts, radius=0.2)
     np.testing.assert_allclose(n_r[:, 2], -1.0, atol=1e-9)
+
+
+def test_hat_batch_is_hat_of_each_vector() -> None:
+    from relnav.geometry.rotations import hat, hat_batch
+
+    rng = np.random.default_rng(3)
+    v, u = rng.normal(size=(6, 3)), rng.normal(size=3)
+    K = hat_batch(v)
+    assert K.shape == (6, 3, 3)
+    np.testing.assert_allclose(K @ u, np.cross(v, u), atol=1e-12)
+    for k in range(6):
+        np.testing.assert_array_equal(K[k], hat(v[k]))

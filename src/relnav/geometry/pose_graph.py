@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from relnav.geometry.lie import exp_se3, log_se3
+from relnav.geometry.rotations import hat_batch
 from relnav.geometry.se3 import invert
 
 __all__ = ["PoseGraph", "PoseGraphResult"]
@@ -231,28 +232,21 @@ def _inv_batch(T: np.ndarray) -> np.ndarray:
     return out
 
 
-def _hat_batch(v: np.ndarray) -> np.ndarray:
-    K = np.zeros((len(v), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return K
-
-
 def _adjoint_batch(T: np.ndarray) -> np.ndarray:
     """Adjoints ``(K, 6, 6)`` of ``(K, 4, 4)`` transforms (see :func:`adjoint`)."""
     A = np.zeros((len(T), 6, 6))
     R = T[:, :3, :3]
     A[:, :3, :3] = R
     A[:, 3:, 3:] = R
-    A[:, :3, 3:] = _hat_batch(T[:, :3, 3]) @ R
+    A[:, :3, 3:] = hat_batch(T[:, :3, 3]) @ R
     return A
 
 
 def _ad_batch(xi: np.ndarray) -> np.ndarray:
     """Small adjoints ``ad(ξ) = [[φ×, ρ×], [0, φ×]]`` (K, 6, 6) of twists ``[ρ, φ]`` (K, 6)."""
     A = np.zeros((len(xi), 6, 6))
-    P = _hat_batch(xi[:, 3:])
+    P = hat_batch(xi[:, 3:])
     A[:, :3, :3] = P
     A[:, 3:, 3:] = P
-    A[:, :3, 3:] = _hat_batch(xi[:, :3])
+    A[:, :3, 3:] = hat_batch(xi[:, :3])
     return A

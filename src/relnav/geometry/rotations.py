@@ -9,6 +9,7 @@ __all__ = [
     "angle_between_rotations",
     "euler_to_matrix",
     "hat",
+    "hat_batch",
     "matrix_to_euler",
     "matrix_to_quat",
     "matrix_to_rotvec",
@@ -25,6 +26,15 @@ def hat(v: np.ndarray) -> np.ndarray:
     """Skew-symmetric matrix ``[v]x`` of a 3-vector, so that ``hat(v) @ u == cross(v, u)``."""
     x, y, z = np.asarray(v, dtype=np.float64).reshape(3)
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def hat_batch(v: np.ndarray) -> np.ndarray:
+    """Skew-symmetric matrices ``(N, 3, 3)`` of the vectors ``(N, 3)`` (:func:`hat` of each)."""
+    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from relnav.geometry.rotations import hat_batch
+
 __all__ = ["SymmetryAxis", "marginalise_direction", "stiffen_prior", "symmetry_axis"]
 
 log = logging.getLogger(__name__)
@@ -67,15 +69,6 @@ class SymmetryAxis:
     arc_deg: float
     axial_fraction: float
     twist: np.ndarray
-
-
-def _skew(p: np.ndarray) -> np.ndarray:
-    """``(N, 3, 3)`` cross-product matrices of ``(N, 3)`` vectors."""
-    S = np.zeros((len(p), 3, 3))
-    S[:, 0, 1], S[:, 0, 2] = -p[:, 2], p[:, 1]
-    S[:, 1, 0], S[:, 1, 2] = p[:, 2], -p[:, 0]
-    S[:, 2, 0], S[:, 2, 1] = -p[:, 1], p[:, 0]
-    return S
 
 
 def _arc_deg(P: np.ndarray, axis: np.ndarray, center: np.ndarray) -> float:
@@ -161,7 +154,7 @@ def symmetry_axis(
     c0 = P.mean(0)
     X = P - c0  # centred for conditioning; the twist is moved back to the map frame below
     L = np.hstack([Nn, np.cross(X, Nn)])
-    S = _skew(X)
+    S = hat_batch(X)
     w = np.ones(len(X))
     lam = U = None
     for _ in range(1 + irls):
