@@ -557,9 +557,24 @@ class Navigator:
                 f"(> {c.stability_gate})",
             )
             info["keep_fit"] = c.stability_pose == "fit"
-        cov = None
+        return self.fit_result(fit, T, H, Lam, status, message, timings, info)
+
+    def fit_result(
+        self,
+        fit: dict[str, Any],
+        T: np.ndarray,
+        H: np.ndarray,
+        prior: np.ndarray,
+        status: str,
+        message: str,
+        timings: dict[str, float],
+        info: dict[str, Any],
+    ) -> RegistrationResult:
+        """The step's :class:`RegistrationResult` from a registration ``fit`` (:meth:`_solve`):
+        pose ``T``, covariance ``(H + prior)⁻¹`` of the scan's information ``H`` and the
+        prior's (left twist, target frame; ``None`` when singular)."""
         try:
-            cov = np.linalg.inv(H + Lam)
+            cov = np.linalg.inv(H + prior)
         except np.linalg.LinAlgError:
             cov = None
         return RegistrationResult(
@@ -569,7 +584,7 @@ class Navigator:
             inlier_rmse=fit["rms"],
             n_correspondences=int(fit["n_pairs"]),
             n_inliers=int(fit["n_inliers"]),
-            converged=fit["iterations"] < c.max_iter,
+            converged=fit["iterations"] < self.config.max_iter,
             status=status,  # type: ignore[arg-type]
             timings=timings,
             message=message,

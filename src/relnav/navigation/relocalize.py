@@ -631,7 +631,7 @@ class Relocalizer:
     ) -> RegistrationResult | None:
         """:meth:`locate`, and the motion filter reset at the verified pose: an ``ok`` result,
         or None (the reason is logged)."""
-        nav, c = self.nav, self.nav.config
+        nav = self.nav
         self.attempts += 1
         best, why = self.locate(P, T_pred, ref_rms)
         if best is None:
@@ -641,14 +641,10 @@ class Relocalizer:
         gate = best["gate"]
         self.successes += 1
         self._reset_motion()
-        T, H = best["T"], best["H"]
-        try:
-            cov = np.linalg.inv(H / best["var_factor"] + nav._weak_prior(T))
-        except np.linalg.LinAlgError:
-            cov = None
+        T, H = best["T"], best["H"] / best["var_factor"]
         info = {
             "method": nav.name,
-            "information": H / best["var_factor"],
+            "information": H,
             "iterations": best["iterations"],
             "overlap": best["overlap"],
             "chi2_motion": best["chi2"],
@@ -672,19 +668,8 @@ class Relocalizer:
             jump,
             ang,
         )
-        return RegistrationResult(
-            T_target_source=T,
-            covariance=cov,
-            fitness=best["fitness"],
-            inlier_rmse=best["rms"],
-            n_correspondences=int(best["n_pairs"]),
-            n_inliers=int(best["n_inliers"]),
-            converged=best["iterations"] < c.max_iter,
-            status="ok",
-            timings=timings,
-            message=(
-                f"relocalised against the model ({best['support']} consistent matches, "
-                f"{jump:.2f} m / {ang:.1f}° from the prediction)"
-            ),
-            info=info,
+        message = (
+            f"relocalised against the model ({best['support']} consistent matches, "
+            f"{jump:.2f} m / {ang:.1f}° from the prediction)"
         )
+        return nav.fit_result(best, T, H, nav._weak_prior(T), "ok", message, timings, info)
