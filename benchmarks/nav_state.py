@@ -27,7 +27,8 @@ max, and the mean 12-dim NEES (a time average of one run: indicative, no band). 
 options it compares the default relative state with the one given those options instead.
 
 ``-S key=value`` passes an option to :func:`relnav.navigation.state.relative_state` (numbers
-are read as floats), e.g. ``-S drift=map`` or ``-S robust_dof=5``.
+are read as floats, ``none`` as None), e.g. ``-S drift=map``, ``-S robust_dof=5`` or
+``-S angular_acceleration=none`` (the torque-free bound alone instead of the adaptive bank).
 """
 
 from __future__ import annotations
@@ -230,8 +231,10 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _value(text: str) -> float | str:
-    """A ``-S`` value: a float when it reads as one, else the string."""
+def _value(text: str) -> float | str | None:
+    """A ``-S`` value: ``None`` for "none", a float when it reads as one, else the string."""
+    if text.lower() == "none":
+        return None
     try:
         return float(text)
     except ValueError:

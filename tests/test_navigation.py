@@ -459,3 +459,25 @@ def test_nearest_map_point_search_reuses_neighbours_exactly(rng):
         ref = np.where((dr < gate) & (dr < dm), trees[8][trees[5][jr]], ref)
         np.testing.assert_array_equal(idx, ref)
     assert (cache[3] >= 0).mean() > 0.5  # most points have a neighbour to reuse
+
+
+def test_relative_state_adaptive_bank_on_a_principal_axis_spin(tumble_run):
+    """angular_acceleration="adaptive": on a spin about a fixed axis (ω̇ = 0) the likelihood
+    moves the bank towards the members with less angular acceleration than the torque-free
+    bound, and the rate is still recovered."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import TORQUE_FREE_SHARES, relative_state
+
+    seq, run = tumble_run
+    res = relative_state(run, gt_poses=seq.gt_poses, angular_acceleration="adaptive")
+    P = res.model_probability
+    assert P.shape == (len(res), len(TORQUE_FREE_SHARES))
+    np.testing.assert_allclose(P.sum(axis=1), 1.0)
+    assert P[-1, 0] < 0.5  # the bound alone is not the most probable model at the end
+    k0 = len(res) // 3
+    err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
+    assert np.median(err) < 0.1 and np.max(err) < 0.2
+    with pytest.raises(ConfigError):
+        relative_state(run, angular_acceleration="fast")
+    with pytest.raises(ConfigError):
+        relative_state(run, angular_acceleration=-1.0)

@@ -60,6 +60,10 @@ class ProcessNoise:
         the step's ``α``. Not ``E|ω|² = |ω̂|² + tr P_ω``: the rate's covariance would then grow
         its own process noise (it diverges where the rate is unobserved). It is a bound: a target
         spinning about a principal axis has ``ω̇ = 0`` and gets a conservative rate.
+    torque_free_share : float
+        Share of that bound taken (default 1): a bank of filters with smaller shares lets the
+        data say whether the target spins about a principal axis
+        (:func:`relnav.fusion.multiple_model.mix_tracks`).
     """
 
     position: float = 1e-4
@@ -69,6 +73,7 @@ class ProcessNoise:
     acceleration: float = 0.0
     angular_acceleration: float = 0.0
     torque_free: bool = False
+    torque_free_share: float = 1.0
 
     def __post_init__(self) -> None:
         _positive_fields(self)

@@ -62,6 +62,18 @@ class UpdateInfo:
     innovation_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     meas_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
+    @property
+    def log_likelihood(self) -> float:
+        """Gaussian log-likelihood of the innovation, ``−½ (νᵀ S⁻¹ ν + log det 2πS)`` (NaN when
+        no innovation was computed): what a bank of filters weighs its members by."""
+        nu, S = self.innovation, self.innovation_cov
+        if nu.size == 0 or S.shape != (nu.size, nu.size) or not np.all(np.isfinite(nu)):
+            return float("nan")
+        sign, logdet = np.linalg.slogdet(2.0 * np.pi * S)
+        if sign <= 0:
+            return float("nan")
+        return float(-0.5 * (nu @ np.linalg.solve(S, nu) + logdet))
+
 
 def quat_delta(omega: np.ndarray, dt: float) -> np.ndarray:
     """``q_Δ = [ω/|ω| sin(½|ω|Δt), cos(½|ω|Δt)]`` (xyzw, Paper 2 eq. 31) of rate(s) ``(..., 3)``.
@@ -204,7 +216,7 @@ class PoseFilter:
         alpha = qn.angular_acceleration
         if qn.torque_free:
             # the estimated rate only: its covariance in the bound would feed back on itself
-            alpha += float(self._w @ self._w) / math.sqrt(3.0)
+            alpha += qn.torque_free_share * float(self._w @ self._w) / math.sqrt(3.0)
         a = qn.acceleration
         held = np.array([0.5 * a * dt * dt, a * dt, 0.5 * alpha * dt * dt, alpha * dt])
         return var + np.repeat(held**2, 3)

@@ -127,6 +127,12 @@ class TrackResult:
         Free-form metadata (sequence folder, observer, seed, alignment...).
     noise_scale : (K,), optional
         Measurement-covariance scale ``λ`` used per step (``Tracker(noise_scale=...)``).
+    log_likelihood : (K,), optional
+        Gaussian log-likelihood of each update's innovation (NaN without one): the evidence a
+        bank of filters is weighed by (:func:`relnav.fusion.multiple_model.mix_tracks`).
+    model_probability : (K, M), optional
+        For a mixed track, each member's probability per step (labels in
+        ``meta["models"]``).
     """
 
     time: np.ndarray
@@ -143,6 +149,8 @@ class TrackResult:
     truth: TrackTruth | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     noise_scale: np.ndarray | None = None
+    log_likelihood: np.ndarray | None = None
+    model_probability: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)

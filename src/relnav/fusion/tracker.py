@@ -90,6 +90,7 @@ class _TrackLog:
         self.om = np.full((K, 3), np.nan)
         self.cov = np.full((K, 12, 12), np.nan)
         self.nis = np.full(K, np.nan)
+        self.loglik = np.full(K, np.nan)
         self.obs = np.full((K, 7), np.nan)
         self.lam = np.full(K, np.nan)
         self.status: list[str] = []
@@ -136,6 +137,7 @@ class _TrackLog:
             truth=truth,
             meta=meta,
             noise_scale=self.lam,
+            log_likelihood=self.loglik,
         )
 
 
@@ -232,6 +234,7 @@ class Tracker:
             raise ConfigError(f"noise_scale must be 'fixed' or 'innovation', got {noise_scale!r}")
         self.noise_scale = noise_scale
         self.lam = 1.0
+        self.log_likelihood = math.nan  # of the last step's update (NaN without one)
         self._innov: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.filter_options = dict(filter_options)
         make_filter(self.filter_name, n_mean_motion=n, **self._opts(1.0))  # validate early
@@ -347,6 +350,7 @@ class Tracker:
             self.lam = self._match_scale()
             R = R0 * self.lam
         info = f.update(obs.position, obs.quat_xyzw, R=R)
+        self.log_likelihood = info.log_likelihood
         if not info.accepted:
             return f"flagged: {info.message}", info.nis
         return "update", info.nis
@@ -393,9 +397,11 @@ class Tracker:
         rec = _TrackLog(K)
         for k in range(K):
             o = observations[k]
+            self.log_likelihood = math.nan
             st, ni = self.step(t[k], o)
             rec.record(k, self.filter, self._initialized, st, ni, o)
             rec.lam[k] = self.lam
+            rec.loglik[k] = self.log_likelihood
             if progress is not None:
                 progress(k + 1, K)
         assert self.filter is not None

@@ -1,0 +1,92 @@
+"""A bank of filters weighed by their innovations' likelihood (relnav.fusion.multiple_model)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from scipy.stats import multivariate_normal
+
+from relnav.errors import InputError
+from relnav.fusion.multiple_model import mix_tracks, model_probabilities
+from relnav.fusion.pose_filter import UpdateInfo
+from relnav.fusion.track_result import TrackResult
+
+
+def test_update_log_likelihood_is_the_gaussian_density(rng):
+    A = rng.normal(size=(6, 6))
+    S = A @ A.T + np.eye(6)
+    nu = rng.normal(size=6)
+    info = UpdateInfo(True, float(nu @ np.linalg.solve(S, nu)), nu, "", S, np.eye(6))
+    expected = multivariate_normal(np.zeros(6), S).logpdf(nu)
+    assert info.log_likelihood == pytest.approx(expected, rel=1e-12)
+    assert np.isnan(UpdateInfo(False, message="rejected early").log_likelihood)
+
+
+def test_model_probabilities_follow_the_evidence_with_a_floor():
+    K = 50
+    L = np.column_stack([np.full(K, -1.0), np.full(K, -2.0), np.full(K, np.nan)])
+    L[:5] = np.nan  # no evidence yet: equal weights
+    L[10, 2] = -0.5  # the third member has an update only once: scored like the worst
+    P = model_probabilities(L, floor=1e-3)
+    np.testing.assert_allclose(P.sum(axis=1), 1.0)
+    np.testing.assert_allclose(P[:5], 1.0 / 3.0)
+    assert P[-1, 0] > 0.99 and P[-1, 1] >= 1e-3 * 0.99 and P[-1, 2] >= 1e-3 * 0.99
+    # one step of evidence: Bayes' rule from equal priors
+    p = model_probabilities(np.array([[0.0, np.log(0.5)]]), floor=0.0)
+    np.testing.assert_allclose(p[0], [2.0 / 3.0, 1.0 / 3.0])
+    # a member that lost comes back when the evidence turns (the floor prevents lock-in)
+    turn = np.vstack([np.tile([-1.0, -3.0], (40, 1)), np.tile([-3.0, -1.0], (10, 1))])
+    assert model_probabilities(turn, floor=1e-3)[-1, 1] > 0.9
+    assert model_probabilities(turn, floor=0.0)[-1, 1] < 1e-6
+    with pytest.raises(InputError):
+        model_probabilities(np.zeros(5))
+    with pytest.raises(InputError):
+        model_probabilities(np.zeros((5, 2)), floor=0.5)
+
+
+def _track(K: int, pos: np.ndarray, quat: np.ndarray, var: float, ll: np.ndarray) -> TrackResult:
+    z3 = np.zeros((K, 3))
+    return TrackResult(
+        time=np.arange(K, dtype=float),
+        position=np.tile(pos, (K, 1)),
+        velocity=z3.copy(),
+        quat=np.tile(quat, (K, 1)),
+        omega=z3.copy(),
+        covariance=np.tile(np.eye(12) * var, (K, 1, 1)),
+        status=["update"] * K,
+        nis=np.ones(K),
+        observed=np.full((K, 7), np.nan),
+        filter="ukf",
+        log_likelihood=ll,
+    )
+
+
+def test_mix_tracks_is_the_moment_matched_mixture():
+    K = 3
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    q1 = Rotation.from_rotvec([0.0, 0.0, 0.02]).as_quat()
+    a = _track(K, np.array([0.0, 0.0, 0.0]), q0, 1e-4, np.array([np.nan, 0.0, 0.0]))
+    b = _track(K, np.array([1.0, 0.0, 0.0]), q1, 4e-4, np.array([np.nan, np.log(1 / 3), 0.0]))
+    m = mix_tracks([a, b], ["a", "b"], floor=0.0)
+    w = m.model_probability[1]
+    np.testing.assert_allclose(w, [0.75, 0.25])
+    np.testing.assert_allclose(m.position[1], [0.25, 0.0, 0.0])
+    # attitude: averaged in the tangent space, 1/4 of the way to b
+    np.testing.assert_allclose(Rotation.from_quat(m.quat[1]).as_rotvec(), [0, 0, 0.005], atol=1e-12)
+    # covariance: the members' average plus their spread about the mean
+    assert m.covariance[1][0, 0] == pytest.approx(0.75 * 1e-4 + 0.25 * 4e-4 + 0.75 * 0.25)
+    assert m.covariance[1][8, 8] == pytest.approx(
+        0.75 * 1e-4 + 0.25 * 4e-4 + 0.75 * 0.25 * 0.02**2, rel=1e-9
+    )
+    assert m.meta["models"] == ["a", "b"] and m.status[1] == "update"
+    # the mixture's predictive likelihood of step 1 (equal priors)
+    assert m.log_likelihood[1] == pytest.approx(np.log(0.5 * 1.0 + 0.5 / 3.0))
+    # identical members: the mixture is each of them
+    same = mix_tracks([a, a])
+    np.testing.assert_allclose(same.position, a.position)
+    np.testing.assert_allclose(same.covariance, a.covariance)
+    with pytest.raises(InputError):
+        mix_tracks([a, _track(2, np.zeros(3), q0, 1e-4, np.zeros(2))])
+    with pytest.raises(InputError):
+        mix_tracks([a, b], ["only one label"])
