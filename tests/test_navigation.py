@@ -319,6 +319,46 @@ def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
     assert not any(s.used_prior for s in tight.steps[1:])
 
 
+def test_step_flags_label_steps_without_changing_poses(orbit_seq):
+    """``flag_probability``: a step whose covariance puts its error beyond the flag limits with
+    a higher probability is ``flagged`` (a label: poses identical to an unflagged run); on the
+    well-observed orbit at the suite's limits (0.5 m, 5°) no step is flagged."""
+    off = run_sequence(orbit_seq, "relnav", max_frames=10, flag_probability=0.0)
+    default = run_sequence(orbit_seq, "relnav", max_frames=10)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=10, flag_limit_t=1e-6)
+    np.testing.assert_array_equal(off.poses, default.poses)
+    np.testing.assert_array_equal(off.poses, tight.poses)
+    assert all(s.status in ("first", "ok") for s in default.steps)
+    # the first two steps (weak start-up prior: 1σ ≈ 0.26 m) 0.06, then below 0.01
+    assert all(s.result.info["exceed_probability"] < 0.2 for s in default.steps[1:])
+    assert all(s.result.info["exceed_probability"] < 0.02 for s in default.steps[4:])
+    assert "exceed_probability" not in off.steps[1].result.info
+    assert all(s.status == "flagged" for s in tight.steps[1:])
+    assert all(s.result.info["exceed_probability"] == 1.0 for s in tight.steps[1:])
+    assert all("probability" in s.result.message for s in tight.steps[1:])
+    assert not any(s.used_prior for s in tight.steps[1:])
+    assert tight.n_flagged == 9
+
+
+def test_exceedance_probability_matches_closed_forms():
+    """One uncertain axis: P(|N(0, σ²)| > L) = 2Φ(−L/σ), within the draws' standard error; both
+    limits at once: the union of independent events; certain and non-finite extremes."""
+    from scipy.stats import norm
+
+    from relnav.navigation.navigator import exceedance_probability
+
+    for sigma in (0.2, 0.5, 1.0):
+        C = np.diag([sigma**2, 0, 0, 0, 0, 0])
+        p = exceedance_probability(C, 0.5, math.radians(5))
+        assert abs(p - 2 * norm.sf(0.5 / sigma)) < 0.03, (sigma, p)
+    C = np.diag([0.5**2, 0, 0, math.radians(5) ** 2, 0, 0])
+    q = 2 * norm.sf(1.0)
+    assert abs(exceedance_probability(C, 0.5, math.radians(5)) - (1 - (1 - q) ** 2)) < 0.03
+    assert exceedance_probability(np.zeros((6, 6)), 0.5, 0.1) == 0.0
+    assert exceedance_probability(1e6 * np.eye(6), 0.5, 0.1) == 1.0
+    assert exceedance_probability(np.full((6, 6), np.nan), 0.5, 0.1) == 1.0
+
+
 def test_normal_information_drops_the_in_plane_pull(rng):
     """On a flat patch the normals fix only z, roll and pitch: the normal-only information has
     no translation along the plane and no rotation about its normal, the solver's has."""
@@ -369,12 +409,12 @@ def test_drift_covariance_maps_the_step_to_the_observation(rng):
 
 def test_map_drift_shares_follow_the_map_running_mean():
     """Frame k merged into a map of n frames moves it by 1/min(n, memory) of its error; frames
-    the navigator did not merge do not count."""
+    the navigator did not merge do not count (a ``flagged`` one was merged)."""
     from types import SimpleNamespace
 
     from relnav.navigation.state import map_drift_shares
 
-    status = ["first", "ok", "ok", "failed", "ok"] + ["ok"] * 10
+    status = ["first", "ok", "flagged", "failed", "ok"] + ["ok"] * 10
     steps = [SimpleNamespace(status=s) for s in status]
     g = map_drift_shares(steps, memory=5.0)
     np.testing.assert_allclose(g[:6], [1.0, 1.0, 1 / 2, 1 / 3, 1 / 3, 1 / 4])

@@ -152,6 +152,9 @@ OPTION_RANGES: dict[str, _Range] = {
     "alert_limit_t": (0, True, None, False),
     "alert_limit_r_deg": (0, True, 180, True),
     "protection_k": (0, False, None, False),
+    "flag_probability": (0, True, 1, False),
+    "flag_limit_t": (0, False, None, False),
+    "flag_limit_r_deg": (0, False, 180, True),
     # its pose graph (loop_closure)
     "keyframe_every": (1, True, None, False),
     "keyframe_window": (0, True, None, False),

@@ -52,6 +52,7 @@ from relnav.errors import ConfigError
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
+from relnav.navigation.options import MERGED_STATUSES
 from relnav.navigation.voxel_map import even_subset, plane_information
 
 if TYPE_CHECKING:
@@ -115,7 +116,7 @@ def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometrySte
     refinement when the window is full; its time is added to this frame's."""
     if nav._win is None or nav.map is None:
         return
-    ok = P is not None and out.status in ("ok", "first")
+    ok = P is not None and out.status in MERGED_STATUSES
     f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
     if ok:
         assert P is not None

@@ -66,6 +66,7 @@ from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.pose_graph import PoseGraph, PoseGraphResult
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.options import MERGED_STATUSES
 from relnav.navigation.voxel_map import VoxelMap
 
 __all__ = [
@@ -312,7 +313,7 @@ class LoopCloser:
             self._step_cov[frame] = np.array(step_covariance, dtype=np.float64)
         if pose_covariance is not None and np.all(np.isfinite(pose_covariance)):
             self._pose_cov[frame] = np.array(pose_covariance, dtype=np.float64)
-        if status in ("ok", "first") and points is not None and len(points) >= 3:
+        if status in MERGED_STATUSES and points is not None and len(points) >= 3:
             self._points[frame] = np.array(points, dtype=np.float64)
         self.time_observe_s += time.perf_counter() - t0
 

@@ -12,7 +12,10 @@ velocity in the sensor frame, its attitude and its body rates, with covariances,
 Frames: the body rates ``ω`` are those of the target relative to the sensor frame, in target
 axes; for a chaser holding an inertial attitude they are the target's inertial rates.
 Directions the scan did not constrain get a large variance (the UKF predicts through them);
-frames the navigator flagged are predicted through (status ``predict``).
+frames the navigator rejected (``failed``, ``degenerate``) are predicted through (status
+``predict``); a ``flagged`` step (``flag_probability`` of
+:class:`~relnav.navigation.options.NavigatorConfig`)
+is observed like an ``ok`` one, its covariance already saying how little it is determined.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from relnav.fusion.multiple_model import mix_tracks
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
+from relnav.navigation.options import MERGED_STATUSES
 
 __all__ = [
     "StateRecord",
@@ -245,7 +249,7 @@ def relative_state(
     observations: list[Observation | None] = []
     for step, share in zip(frames, shares, strict=True):
         H = step.information
-        if step.status not in ("ok", "first"):
+        if step.status not in MERGED_STATUSES:
             observations.append(None)
             continue
         T_st = invert(step.pose)
@@ -354,7 +358,7 @@ def map_drift_shares(steps: Sequence[Any], memory: float = 20.0) -> np.ndarray:
     (N,) float64
         ``1 / min(n, memory)`` per frame, in (0, 1].
     """
-    merged = np.cumsum([s.status in ("ok", "first") for s in steps])
+    merged = np.cumsum([s.status in MERGED_STATUSES for s in steps])
     n = np.maximum(np.concatenate([[0], merged[:-1]]), 1).astype(float)
     return 1.0 / np.minimum(n, float(memory))
 
@@ -387,7 +391,7 @@ def pose_noise(steps: Sequence[Any], frame: str = "sensor") -> tuple[float, floa
     if frame not in ("sensor", "target"):
         raise ConfigError(f"frame must be 'sensor' or 'target', got {frame!r}")
     poses = [s.pose for s in steps]
-    ok = [s.status in ("ok", "first") for s in steps]
+    ok = [s.status in MERGED_STATUSES for s in steps]
     d2 = []
     for k in range(2, len(poses)):
         if ok[k] and ok[k - 1] and ok[k - 2]:
