@@ -90,3 +90,27 @@ def test_mix_tracks_is_the_moment_matched_mixture():
         mix_tracks([a, _track(2, np.zeros(3), q0, 1e-4, np.zeros(2))])
     with pytest.raises(InputError):
         mix_tracks([a, b], ["only one label"])
+
+
+def test_a_bank_of_trackers_prefers_the_model_that_generated_the_data(tmp_path):
+    """Constant-rate observations: a bank of a tight and a loose process noise ends on the tight
+    one; the likelihoods are those of the updates; the CSV carries the probabilities."""
+    import csv
+
+    from relnav.fusion.observers import simulate_observations
+    from relnav.fusion.tracker import Tracker
+
+    t, obs, truth = simulate_observations(30, 4.5, seed=3)
+    loose = {"position": 1e-2, "velocity": 1e-2, "attitude": 0.05, "omega": 0.02}
+    tight = {"position": 1e-4, "velocity": 1e-4, "attitude": 4e-3, "omega": 1e-4}
+    bank = [Tracker("ukf", q=q).run(t, obs, truth=truth) for q in (loose, tight)]
+    for r in bank:
+        upd = np.array([s == "update" for s in r.status])
+        assert np.all(np.isfinite(r.log_likelihood[upd])) and np.all(
+            np.isnan(r.log_likelihood[~upd])
+        )
+    m = mix_tracks(bank, ["loose", "tight"])
+    assert m.model_probability[-1, 1] > 0.9
+    rows = list(csv.DictReader(m.to_csv(tmp_path / "m.csv").open()))
+    assert {"log_likelihood", "p_model0", "p_model1"} <= set(rows[0])
+    assert float(rows[-1]["p_model1"]) == pytest.approx(m.model_probability[-1, 1], rel=1e-6)

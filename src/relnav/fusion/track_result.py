@@ -297,7 +297,9 @@ class TrackResult:
     def to_csv(self, path: str | Path) -> Path:
         """Write one row per step: estimate, 1σ, observation, and truth/errors when present.
 
-        Angles in degrees (Euler angles extrinsic xyz), rates in deg/s, lengths in metres.
+        Angles in degrees (Euler angles extrinsic xyz), rates in deg/s, lengths in metres; a
+        mixed track adds each member's probability (``p_model<i>``, members in
+        ``meta["models"]``).
         """
         path = Path(path)
         sig = self.sigma()
@@ -334,6 +336,11 @@ class TrackResult:
             cols["nees"] = self.nees()
         if self.noise_scale is not None:
             cols["noise_scale"] = np.asarray(self.noise_scale, dtype=np.float64)
+        if self.log_likelihood is not None:
+            cols["log_likelihood"] = np.asarray(self.log_likelihood, dtype=np.float64)
+        if self.model_probability is not None:
+            for i in range(self.model_probability.shape[1]):
+                cols[f"p_model{i}"] = self.model_probability[:, i]
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
