@@ -24,7 +24,9 @@ rotation centre for the variants that estimate it (``gt_alignment="centre"``).
 
 Run: ``python benchmarks/paper2_experiment.py --out docs/results/paper2 [--seeds 20]``
 (about 50 s per seed on one core; ``--work DIR`` keeps the simulated sequences and the recorded
-observations, so a re-run only re-runs the filters).
+observations, so a re-run only re-runs the filters). The recorded observations
+(``obsNNN_…_src.npz``) include the contour model's match shares per merged frame, which the
+``merge_slots`` variant uses (docs/results/paper2/merge_states.md).
 """
 
 from __future__ import annotations

@@ -66,6 +66,14 @@ views constrain it less than one registration onto the whole model. The tracker'
 ≈ 3.5× too small. Leave-one-out rounds do not converge: more rounds give larger errors. Same
 cost per sequence (≈ 19 s against 22 s for 16 frames). Off by default.
 
+**Match sources** (sequential model): the model keeps, per point, the share each merged frame
+contributed to it (voxel centroids average the shares like the points). After each accepted
+frame ``last_sources`` is ``{history index: share}`` of the frame's matches (nearest model
+point within the quality gate at the accepted pose; shares sum to 1): a merged frame's pose
+error is written into its part of the model, and a registration inherits the errors of the
+parts it matched (``TwistorUKF(merge_slots=…)``, docs/results/paper2/merge_states.md).
+``None`` for the first frame, a rejected frame and with ``multiview``.
+
 Uncertainty of the observation (``last_covariance`` after each accepted frame, ``(6, 6)`` of
 ``[δD (m, sensor frame), δθ (rad, body axes: Q_true = Q ⊗ exp(δθ))]``), ``covariance=``:
 
