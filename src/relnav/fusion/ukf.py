@@ -665,7 +665,7 @@ class TwistorUKF(PoseFilter):
         self._prop = None
         if self.centre_offset:
             self._axis_constraint()
-        return UpdateInfo(True, nis, nu, "", Pzz, Rz)
+        return UpdateInfo(True, nis, nu, "", Pzz, Rz if Rz_used is None else Rz_used)
 
     def _student_scale(self, A: np.ndarray, Rz: np.ndarray, nu: np.ndarray) -> float:
         """Scale ``s ≥ 1`` of the measurement covariance under a Student-t noise (``ν`` dof).
