@@ -375,3 +375,5 @@ def test_merge_slots_bookkeeping() -> None:
     assert g.merge_errors == {}
     with pytest.raises(InputError):
         simulate_observations(4, merge_sources=np.ones((4, 4)))
+    with pytest.raises(InputError):
+        simulate_observations(4, merge_sources=np.zeros((4, 4)), missing=[2])

@@ -144,7 +144,8 @@ def simulate_observations(
         pose (``D = p + R e_p``, ``Q = q ⊗ exp(e_θ)``), is then ``e_k = Σ_j W_kj e_j + v_k``
         with ``v_k`` the noise above drawn in body axes, and ``e_0 = 0`` (frame 0 is the
         anchor). Every observation carries ``frame = k``, ``sources`` (row ``k``; ``{}`` for
-        frame 0) and ``R`` (the covariance of ``v_k``, position block in sensor axes).
+        frame 0) and ``R`` (the covariance of ``v_k``, position block in sensor axes); no
+        ``missing`` steps.
     seed : int or Generator
         Noise seed.
 
@@ -157,6 +158,8 @@ def simulate_observations(
     if int(n_steps) < 1 or not dt > 0:
         raise InputError(f"need n_steps >= 1 and dt > 0, got {n_steps}, {dt}")
     if merge_sources is not None:
+        if len(missing):
+            raise InputError("missing steps are not simulated with merge_sources")
         return _simulate_merged(
             n_steps, dt, omega_deg_s, position0, velocity0, quat0, n_mean_motion, lvlh_axes,
             sigma_position, sigma_attitude_deg, offset, np.asarray(merge_sources, float), seed,
