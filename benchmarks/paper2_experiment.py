@@ -24,7 +24,9 @@ rotation centre for the variants that estimate it (``gt_alignment="centre"``).
 
 Run: ``python benchmarks/paper2_experiment.py --out docs/results/paper2 [--seeds 20]``
 (about 50 s per seed on one core; ``--work DIR`` keeps the simulated sequences and the recorded
-observations, so a re-run only re-runs the filters).
+observations, so a re-run only re-runs the filters). The recorded observations
+(``obsNNN_…_src.npz``) include the contour model's match shares per merged frame, which the
+``merge_slots`` variant uses (docs/results/paper2/merge_states.md).
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], bool]] = {
         {"centre_offset": True, "observer_bias": True, "noise_scale": "innovation"},
         True,
     ),
+    "ukf+offset+merges+jackknife": ("ukf", {"centre_offset": True, "merge_slots": 16}, True),
     "ekf+jackknife": ("ekf", {}, True),
     "main, ω₀ = 0 (relnav track default)": (
         "ukf",
@@ -168,7 +171,10 @@ def observe_seed(
     (``model_options``: passed to the contour model, :class:`relnav.fusion.ContourModel`).
 
     Returns arrays ``time (K,)``, ``obs (K, 7)`` (NaN = none), ``R (K, 6, 6)`` (NaN = none),
-    ``quality (K,)`` and the truth ``T_s_target (K, 4, 4)``.
+    ``quality (K,)``, the truth ``T_s_target (K, 4, 4)`` and the observer's match sources
+    ``W (K, K)``: ``W[k, j]`` = share of observation ``k``'s model matches contributed by the
+    frame merged at step ``j``; row ``k`` all NaN when observation ``k`` carries no sources,
+    all zero for the anchor frame.
     """
     fname, opts, _ = VARIANTS[MAIN]
     rec = _Recorder(ContourObserver(lidar="lidar", seed=seed, model_options=model_options))
@@ -177,6 +183,7 @@ def observe_seed(
     obs = np.full((K, 7), np.nan)
     R = np.full((K, 6, 6), np.nan)
     quality = np.full(K, np.nan)
+    W = np.full((K, K), np.nan)
     for k in range(K):
         o = rec.observations.get(k)
         if o is None:
@@ -185,8 +192,19 @@ def observe_seed(
         quality[k] = o.quality
         if o.R is not None:
             R[k] = o.R
+        if o.sources is not None:
+            W[k] = 0.0
+            for j, w in o.sources.items():
+                W[k, j] = w
     T_s_target = invert(ScanSequence(seq).gt_poses[:K])
-    return {"time": main.time, "obs": obs, "R": R, "quality": quality, "T_s_target": T_s_target}
+    return {
+        "time": main.time,
+        "obs": obs,
+        "R": R,
+        "quality": quality,
+        "T_s_target": T_s_target,
+        "W": W,
+    }
 
 
 def recorded_observations(
@@ -194,7 +212,8 @@ def recorded_observations(
 ) -> list[Observation | None]:
     """One seed's recorded observations for :meth:`Tracker.run` (``None`` where none). With
     ``use_R`` each carries the observer's covariance × ``r_scale`` and, as the drift of the
-    observer bias, the previous observation's covariance × ``drift_scale``."""
+    observer bias, the previous observation's covariance × ``drift_scale``; with recorded
+    match sources (``W``) each carries its frame id and sources (for ``merge_slots``)."""
     obs: list[Observation | None] = []
     prev_R = None  # the drift of frame k = covariance of the previous observation
     for k in range(len(rec["time"])):
@@ -202,12 +221,16 @@ def recorded_observations(
             obs.append(None)
             continue
         Rk = rec["R"][k] if use_R and np.all(np.isfinite(rec["R"][k])) else None
+        W = rec.get("W")
+        merged = W is not None and bool(np.all(np.isfinite(W[k])))
         o = Observation(
             rec["obs"][k, :3],
             rec["obs"][k, 3:],
             rec["quality"][k],
             R=None if Rk is None else Rk * r_scale,
             drift=None if prev_R is None else prev_R * drift_scale,
+            frame=k if merged else None,
+            sources={int(j): float(W[k, j]) for j in np.flatnonzero(W[k] > 0)} if merged else None,
         )
         prev_R = Rk
         obs.append(o)
@@ -573,7 +596,7 @@ def main() -> None:
         mtag = "_".join(o.replace("=", "-") for o in sorted(args.model_option))
         cache = work / (
             f"obs{seed:03d}_{args.frames}f_{args.distance:g}m{tag and '_' + tag}"
-            f"{mtag and '_model-' + mtag}.npz"
+            f"{mtag and '_model-' + mtag}_src.npz"
         )
         ts = time.perf_counter()
         if cache.is_file():

@@ -297,3 +297,83 @@ def test_nees_blocks_are_the_blocks_of_the_full_nees() -> None:
     assert est.sum() >= 10
     np.testing.assert_allclose(blocks[est].sum(axis=1), full[est], rtol=1e-9)
     assert np.all(np.isnan(blocks[~est]))
+
+
+def _views_sources(n: int, per: int = 16, width: int = 2) -> np.ndarray:
+    """Match shares of a target turning 360°/``per`` per frame: frame ``k`` matches the model
+    parts merged at the frames within ``width`` views of its own (the latest first)."""
+    W = np.zeros((n, n))
+    for k in range(1, n):
+        for j in range(k):
+            a = min((k - j) % per, (j - k) % per)
+            if a <= width:
+                W[k, j] = math.exp(-a)
+        W[k] /= W[k].sum()
+    return W
+
+
+def test_merge_states_fit_inherited_model_errors() -> None:
+    """An observer whose model inherits each merged frame's error (e_k = Σ_j W_kj e_j + v_k,
+    body axes, returning to the anchor's views after a turn): the merge states are consistent
+    (pooled NEES and NIS in the 20-seed band, no growth over the run); a random-walk bias fed
+    the frames' covariance and a plain filter are not."""
+    W = _views_sources(24)
+    nees: dict[str, list[np.ndarray]] = {"merges": [], "bias": [], "plain": []}
+    nis: list[np.ndarray] = []
+    opts = {"merges": {"merge_slots": 24}, "bias": {"observer_bias": True}, "plain": {}}
+    for seed in range(20):
+        t, obs, truth = simulate_observations(
+            24, 4.5, sigma_position=0.005, sigma_attitude_deg=0.3, offset=(0.05, 0.0, 0.0),
+            merge_sources=W, seed=seed,
+        )  # fmt: skip
+        # the bias variant: drift = the previous frame's covariance (as ContourObserver)
+        drifted = [obs[0]] + [
+            Observation(o.position, o.quat_xyzw, R=o.R, drift=obs[k].R)
+            for k, o in enumerate(obs[1:])
+        ]
+        for name, o in opts.items():
+            res = Tracker("ukf", omega0=OMEGA0, q=RIGID_Q, centre_offset=True, **o).run(
+                t, drifted if name == "bias" else obs, truth=truth
+            )
+            nees[name].append(res.nees()[3:])
+            if name == "merges":
+                nis.append(res.nis[3:])
+    mean = {k: float(np.mean(v)) for k, v in nees.items()}
+    lo20, hi20 = _band(12, 20)
+    assert lo20 <= mean["merges"] <= hi20, mean
+    assert mean["plain"] > 5 * hi20, mean
+    assert mean["bias"] < lo20, mean  # the drift of every frame is kept: far too cautious
+    lo6, hi6 = _band(6, 20)
+    assert lo6 <= float(np.mean(nis)) <= hi6
+    anees = np.mean(np.array(nees["merges"]), axis=0)
+    assert np.mean((anees >= lo20) & (anees <= hi20)) >= 0.8, anees
+
+
+def test_merge_slots_bookkeeping() -> None:
+    W = _views_sources(10)
+    _, obs, _ = simulate_observations(10, 4.5, merge_sources=W, seed=1)
+    f = TwistorUKF(dt=4.5, omega0=OMEGA0, merge_slots=3)
+    assert f.dim == 15 + 18
+    f.initialize(obs[0].position, obs[0].quat_xyzw, omega=OMEGA0)
+    for k in range(1, 10):
+        f.predict(4.5)
+        f.set_merge_sources(obs[k].frame, obs[k].sources)
+        assert f.update(obs[k].position, obs[k].quat_xyzw, R=obs[k].R).accepted
+    kept = f.merge_errors
+    assert len(kept) == 3 and set(kept) <= set(range(1, 10)) and 9 in kept
+    # an unmerged observation (frame None) leaves no state behind
+    f.predict(4.5)
+    f.set_merge_sources(None, {9: 1.0})
+    f.update(obs[9].position, obs[9].quat_xyzw, R=obs[9].R)
+    assert set(f.merge_errors) == set(kept)
+    with pytest.raises(ConfigError):
+        TwistorUKF(merge_slots=2, observer_bias=True)
+    with pytest.raises(ConfigError):
+        TwistorUKF(merge_slots=-1)
+    g = TwistorUKF()
+    g.set_merge_sources(3, {1: 1.0})  # no merge states: nothing happens
+    assert g.merge_errors == {}
+    with pytest.raises(InputError):
+        simulate_observations(4, merge_sources=np.ones((4, 4)))
+    with pytest.raises(InputError):
+        simulate_observations(4, merge_sources=np.zeros((4, 4)), missing=[2])

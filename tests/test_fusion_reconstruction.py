@@ -198,3 +198,27 @@ def test_pose_graph_solver_recovers_consistent_poses() -> None:
     for T, T_true in zip(poses, truth, strict=True):
         np.testing.assert_allclose(T, T_true, atol=1e-8)
     assert 1 <= iterations < 20
+
+
+def test_match_sources_share_the_matches_among_merged_frames() -> None:
+    """Each registration reports which merged frames its matches came from (shares summing to
+    1); the first frame (the anchor) and the multi-view model report none."""
+    clouds, _ = _frames(5)
+    model = ContourModel(seed=0)
+    model.observe(clouds[0])
+    assert model.last_sources is None
+    model.observe(clouds[1])
+    assert model.last_sources == {0: pytest.approx(1.0)}
+    for k in range(2, 5):
+        model.observe(clouds[k])
+        src = model.last_sources
+        assert src is not None and set(src) <= set(range(k)), src
+        assert sum(src.values()) == pytest.approx(1.0)
+        assert all(w > 0 for w in src.values())
+    # a rejected frame reports none and is not a source later
+    model.observe(np.zeros((0, 3)))
+    assert model.last_sources is None
+    mv = ContourModel(seed=0, multiview=True)
+    mv.observe(clouds[0])
+    mv.observe(clouds[1])
+    assert mv.last_sources is None

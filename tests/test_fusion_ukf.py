@@ -329,3 +329,17 @@ def test_student_t_update_down_weights_a_one_off_error_only() -> None:
     assert t.settings()["robust_dof"] == 4.0
     with pytest.raises(ConfigError):
         TwistorUKF(robust_dof=0.0)
+
+
+def test_robust_update_reports_its_scaled_measurement_covariance() -> None:
+    """With a Student-t measurement an outlying innovation inflates the measurement covariance,
+    and the update reports the covariance it used (the tracker's innovation matching reads it)."""
+    infos = []
+    for dof in (None, 3.0):
+        f = TwistorUKF(dt=4.5, robust_dof=dof)
+        f.predict()
+        infos.append(f.update([5.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))  # ≈ 10σ off
+    plain, robust = infos
+    assert robust.meas_cov[0, 0] > 2.0 * plain.meas_cov[0, 0]
+    np.testing.assert_allclose(robust.meas_cov / robust.meas_cov[0, 0],
+                               plain.meas_cov / plain.meas_cov[0, 0])  # fmt: skip

@@ -59,6 +59,15 @@ class Observation:
     drift : (6, 6) ndarray, optional
         Growth of the observer's own slowly varying error since its previous observation
         (same coordinates), for ``TwistorUKF(observer_bias=True)``.
+    frame : int, optional
+        The observer's id of this frame when the frame was merged into its model (the keys of
+        later observations' ``sources``); ``None``: not merged.
+    sources : dict of int to float, optional
+        Where the observation's model matches came from: ``{frame id: share}`` of the earlier
+        merged frames (shares sum to 1), for ``TwistorUKF(merge_slots=…)``. Each merged frame
+        wrote its pose error into the model, and a registration onto that part of the model
+        inherits it. An empty dict marks the anchor frame, which defines the body frame (its
+        merge carries no error); ``None``: no such information.
     """
 
     position: np.ndarray
@@ -66,6 +75,8 @@ class Observation:
     quality: float = 1.0
     R: np.ndarray | None = None
     drift: np.ndarray | None = None
+    frame: int | None = None
+    sources: dict[int, float] | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.position, dtype=np.float64)
@@ -97,6 +108,7 @@ def simulate_observations(
     sigma_attitude_deg: float = 1.0,
     missing: Sequence[int] = (),
     offset: Sequence[float] = (0.0, 0.0, 0.0),
+    merge_sources: np.ndarray | None = None,
     seed: int | np.random.Generator | None = 0,
 ) -> tuple[np.ndarray, list[Observation | None], TrackTruth]:
     """Observations of a target spinning at a constant body rate, with CW relative translation.
@@ -124,6 +136,16 @@ def simulate_observations(
         observed position is ``d + R c`` (it circles the spin axis). Truth is the point of
         the spin axis nearest the reference point, ``d + R c_∥`` with ``c_∥`` the component
         of ``c`` along ``ω`` (the component the observations can resolve).
+    merge_sources : (K, K) array_like, optional
+        An observer that builds a model and inherits its merge errors (the contour model,
+        ``TwistorUKF(merge_slots=…)``): ``W[k, j]`` (``j < k``, rows summing to 1) is the share
+        of frame ``k``'s matches on the part of the model frame ``j`` contributed. The error of
+        observation ``k`` in body axes, a right perturbation ``[e_p (m), e_θ (rad)]`` of the
+        pose (``D = p + R e_p``, ``Q = q ⊗ exp(e_θ)``), is then ``e_k = Σ_j W_kj e_j + v_k``
+        with ``v_k`` the noise above drawn in body axes, and ``e_0 = 0`` (frame 0 is the
+        anchor). Every observation carries ``frame = k``, ``sources`` (row ``k``; ``{}`` for
+        frame 0) and ``R`` (the covariance of ``v_k``, position block in sensor axes); no
+        ``missing`` steps.
     seed : int or Generator
         Noise seed.
 
@@ -135,6 +157,13 @@ def simulate_observations(
     """
     if int(n_steps) < 1 or not dt > 0:
         raise InputError(f"need n_steps >= 1 and dt > 0, got {n_steps}, {dt}")
+    if merge_sources is not None:
+        if len(missing):
+            raise InputError("missing steps are not simulated with merge_sources")
+        return _simulate_merged(
+            n_steps, dt, omega_deg_s, position0, velocity0, quat0, n_mean_motion, lvlh_axes,
+            sigma_position, sigma_attitude_deg, offset, np.asarray(merge_sources, float), seed,
+        )  # fmt: skip
     rng = np.random.default_rng(seed)
     K = int(n_steps)
     w = np.radians(np.asarray(omega_deg_s, dtype=np.float64).reshape(3))
@@ -168,6 +197,47 @@ def simulate_observations(
         None if k in miss else Observation(ref[k] + noise_p[k], zq[k]) for k in range(K)
     ]
     truth = TrackTruth(P, V, Qs, np.tile(w, (K, 1)))
+    return times, obs, truth
+
+
+def _simulate_merged(
+    n_steps: int,
+    dt: float,
+    omega_deg_s: Sequence[float],
+    position0: Sequence[float],
+    velocity0: Sequence[float],
+    quat0: Sequence[float],
+    n_mean_motion: float,
+    lvlh_axes: str | np.ndarray | None,
+    sigma_position: float,
+    sigma_attitude_deg: float,
+    offset: Sequence[float],
+    W: np.ndarray,
+    seed: int | np.random.Generator | None,
+) -> tuple[np.ndarray, list[Observation | None], TrackTruth]:
+    """:func:`simulate_observations` with ``merge_sources`` (see there)."""
+    K = int(n_steps)
+    if W.shape != (K, K) or not np.all(np.isfinite(W)) or np.any(np.triu(W) != 0.0):
+        raise InputError(f"merge_sources must be a finite strictly lower-triangular ({K}, {K})")
+    rng = np.random.default_rng(seed)
+    times, exact, truth = simulate_observations(
+        K, dt, omega_deg_s=omega_deg_s, position0=position0, velocity0=velocity0, quat0=quat0,
+        n_mean_motion=n_mean_motion, lvlh_axes=lvlh_axes, sigma_position=0.0,
+        sigma_attitude_deg=0.0, offset=offset, seed=None,
+    )  # fmt: skip
+    sig = np.r_[[sigma_position] * 3, [math.radians(sigma_attitude_deg)] * 3]
+    e = np.zeros((K, 6))
+    for k in range(1, K):
+        e[k] = W[k] @ e + rng.normal(size=6) * sig
+    obs: list[Observation | None] = []
+    for k, o in enumerate(exact):
+        assert o is not None
+        Rk = quat_to_matrix(o.quat_xyzw)
+        q = _qmul(o.quat_xyzw, quat_delta(e[k, 3:], 1.0))
+        cov = np.diag(sig**2)
+        cov[0:3, 0:3] = Rk @ cov[0:3, 0:3] @ Rk.T
+        sources = {int(j): float(W[k, j]) for j in np.flatnonzero(W[k] > 0.0)}
+        obs.append(Observation(o.position + Rk @ e[k, :3], q, R=cov, frame=k, sources=sources))
     return times, obs, truth
 
 
@@ -326,6 +396,7 @@ class ContourObserver:
         self.name = "contour"
         self.n_fusion_failed = 0
         self._last_R: np.ndarray | None = None
+        self._frame_of: dict[int, int] = {}  # model history index -> observer frame id k
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -368,6 +439,7 @@ class ContourObserver:
             T_M_B = np.eye(4)
             T_M_B[:3, 3] = b
             init = T_M_B @ invert(prior)
+        self._frame_of[len(self.model.history)] = k
         position, quat, quality = self.model.observe(cloud, init=init)
         if quality <= 0.0:
             reason = self.model.history[-1].get("reason", "rejected") if self.model.history else ""
@@ -376,7 +448,24 @@ class ContourObserver:
         # [interpretation] the frame merged last carries its pose error into the model, which
         # the following registrations inherit: that is the observer's drift since then
         drift, self._last_R = self._last_R, R
-        return Observation(np.asarray(position), np.asarray(quat), float(quality), R=R, drift=drift)
+        # the sequential model records which merged frames the registration matched
+        # (first frame: the anchor, no sources; multiview: not recorded)
+        src = self.model.last_sources
+        if self.model.multiview:
+            sources = None
+        elif self.model.n_frames == 1:
+            sources = {}
+        else:
+            sources = {self._frame_of[j]: w for j, w in (src or {}).items()}
+        return Observation(
+            np.asarray(position),
+            np.asarray(quat),
+            float(quality),
+            R=R,
+            drift=drift,
+            frame=None if self.model.multiview else k,
+            sources=sources,
+        )
 
 
 def _default_observer(second: str | None, seed: int) -> Observer:

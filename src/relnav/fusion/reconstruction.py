@@ -66,6 +66,14 @@ views constrain it less than one registration onto the whole model. The tracker'
 ≈ 3.5× too small. Leave-one-out rounds do not converge: more rounds give larger errors. Same
 cost per sequence (≈ 19 s against 22 s for 16 frames). Off by default.
 
+**Match sources** (sequential model): the model keeps, per point, the share each merged frame
+contributed to it (voxel centroids average the shares like the points). After each accepted
+frame ``last_sources`` is ``{history index: share}`` of the frame's matches (nearest model
+point within the quality gate at the accepted pose; shares sum to 1): a merged frame's pose
+error is written into its part of the model, and a registration inherits the errors of the
+parts it matched (``TwistorUKF(merge_slots=…)``, docs/results/paper2/merge_states.md).
+``None`` for the first frame, a rejected frame and with ``multiview``.
+
 Uncertainty of the observation (``last_covariance`` after each accepted frame, ``(6, 6)`` of
 ``[δD (m, sensor frame), δθ (rad, body axes: Q_true = Q ⊗ exp(δθ))]``), ``covariance=``:
 
@@ -328,6 +336,11 @@ class ContourModel:
     def reset(self) -> None:
         """Forget the model and the pose history."""
         self._model = np.zeros((0, 3))
+        # sequential model: share of each model point contributed by each merged frame
+        # (rows sum to 1; columns = merged frames in order, see merged_frames)
+        self._sources = np.zeros((0, 0))
+        self._merged: list[int] = []  # history index of each merged frame
+        self.last_sources: dict[int, float] | None = None
         self._poses: list[np.ndarray] = []  # T_model_frame of every accepted frame
         self._frames: list[np.ndarray] = []  # multiview: downsampled cloud of each, in S_k
         # multiview graph: (j, k) -> (Z = T_{S_j,S_k}, information (6, 6), right perturbation)
@@ -403,6 +416,7 @@ class ContourModel:
                 raise InputError(f"init must be a finite 4x4 matrix, got shape {init.shape}")
         k = len(self.history)
         self.last_covariance = None
+        self.last_sources = None
         if not self._poses:
             return self._first(P, k)
         pred = self._predict() if init is None else init
@@ -450,7 +464,8 @@ class ContourModel:
         else:
             if self.covariance != "none":
                 self.last_covariance = self._observation_covariance(src, T, res, self._model)
-            self._merge(P, T)
+            self.last_sources = self._match_sources(src, T, tree)
+            self._merge(P, T, k)
             self._poses.append(T)
         self.T_model_frame = T
         obs = self._observation(T, q)
@@ -475,7 +490,7 @@ class ContourModel:
             self._frames.append(self._downsample(P))
             self._model = self._union(exclude=None, grow=True)
         else:
-            self._merge(P, T)
+            self._merge(P, T, k)
         self.T_model_frame = T
         self.history.append(
             {"frame": k, "accepted": True, "quality": 1.0, "rmse": 0.0, "start": "first",
@@ -517,17 +532,41 @@ class ContourModel:
         assert self._voxel is not None
         return voxel_downsample(P, self._voxel)
 
-    def _merge(self, P: np.ndarray, T_model_frame: np.ndarray) -> None:
-        from relnav.features.keypoints import voxel_downsample
+    def _merge(self, P: np.ndarray, T_model_frame: np.ndarray, k: int) -> None:
+        """Append frame ``k`` (history index) at ``T_model_frame`` and voxel-downsample the
+        model; the per-point source shares follow the same voxel averaging."""
+        from relnav.features.keypoints import voxel_downsample, voxel_groups
 
         assert self._voxel is not None
         Pm = P @ T_model_frame[:3, :3].T + T_model_frame[:3, 3]
         merged = np.vstack([self._model, Pm])
+        n_old = self._model.shape[0]
+        S = np.zeros((merged.shape[0], len(self._merged) + 1))
+        S[:n_old, :-1] = self._sources
+        S[n_old:, -1] = 1.0
+        self._merged.append(k)
         model = voxel_downsample(merged, self._voxel)
         while model.shape[0] > self.max_model_points:
             self._voxel *= math.sqrt(2.0)
             model = voxel_downsample(merged, self._voxel)
+        inv, M = voxel_groups(merged, self._voxel)
+        counts = np.bincount(inv, minlength=M).astype(np.float64)
+        self._sources = (
+            np.stack([np.bincount(inv, weights=S[:, j], minlength=M) for j in range(S.shape[1])], 1)
+            / counts[:, None]
+        )
         self._model = model
+
+    def _match_sources(self, src: np.ndarray, T: np.ndarray, tree: cKDTree) -> dict[int, float]:
+        """Share of frame ``src``'s matches (nearest model point within the quality gate, at
+        ``T``) contributed by each merged frame: ``{history index: share}`` (shares sum to 1;
+        empty when nothing matches)."""
+        _, idx = tree.query(src @ T[:3, :3].T + T[:3, 3], distance_upper_bound=self._gate())
+        idx = idx[idx < self._model.shape[0]]
+        if idx.size == 0 or self._sources.shape[0] != self._model.shape[0]:
+            return {}
+        w = self._sources[idx].mean(axis=0)
+        return {j: float(x) for j, x in zip(self._merged, w, strict=True) if x > 0.0}
 
     def _union(self, exclude: int | None, *, grow: bool = False) -> np.ndarray:
         """Voxel-downsampled union of the stored frames at their poses, in ``M`` (multiview),

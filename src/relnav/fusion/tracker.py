@@ -341,6 +341,8 @@ class Tracker:
         R = obs.R
         if obs.drift is not None and hasattr(f, "add_observer_drift"):
             f.add_observer_drift(obs.drift)
+        if obs.sources is not None and hasattr(f, "set_merge_sources"):
+            f.set_merge_sources(obs.frame, obs.sources)
         if self.noise_scale == "innovation":
             R0 = f.R if R is None else np.asarray(R, dtype=np.float64)
             probe = copy.deepcopy(f).update(obs.position, obs.quat_xyzw, R=R0)
@@ -532,7 +534,9 @@ def track_sequence(
         Passed to :class:`Tracker` (``n_mean_motion``, ``orbit_radius_m``, ``q``, ``r`` …).
         With the UKF and the contour observer, ``centre_offset`` and ``observer_bias`` default
         to ``True`` (:class:`relnav.fusion.ukf.TwistorUKF`): its reference point is the first
-        frame's centroid, which circles the spin axis, and its model drifts.
+        frame's centroid, which circles the spin axis, and its model drifts. With
+        ``merge_slots`` > 0 the merge states replace the bias (``observer_bias`` then defaults
+        to ``False``).
 
     Returns
     -------
@@ -583,7 +587,8 @@ def track_sequence(
     if str(filter).lower() == "ukf" and isinstance(obs_impl, ContourObserver):
         # the contour model's reference point circles the spin axis and the model drifts
         tracker_options.setdefault("centre_offset", True)
-        tracker_options.setdefault("observer_bias", True)
+        if not tracker_options.get("merge_slots"):  # the merge states replace the bias
+            tracker_options.setdefault("observer_bias", True)
     tracker = Tracker(filter, **tracker_options)
     steps = np.diff(times)
     steps = steps[steps > 0]
