@@ -517,6 +517,9 @@ def test_relative_state_adaptive_bank_on_a_principal_axis_spin(tumble_run):
     k0 = len(res) // 3
     err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
     assert np.median(err) < 0.1 and np.max(err) < 0.2
+    # no bank without the physics noise: one filter
+    one = relative_state(run, process_noise="poses", angular_acceleration="adaptive")
+    assert one.model_probability is None
     with pytest.raises(ConfigError):
         relative_state(run, angular_acceleration="fast")
     with pytest.raises(ConfigError):

@@ -181,7 +181,8 @@ def relative_state(
         attitude). ``"adaptive"`` **[interpretation]**: a bank of three filters taking 1, 1/10
         and 1/100 of that bound, mixed by the likelihood of their innovations
         (:func:`relnav.fusion.multiple_model.mix_tracks`, probability floor 1e-3), so that the
-        data tell a target spinning about a principal axis (``ω̇ = 0``) from a tumbling one.
+        data tell a target spinning about a principal axis (``ω̇ = 0``) from a tumbling one
+        (one filter, as ``None``, with ``process_noise="poses"`` or a caller's ``q``).
         Measured bound → adaptive after the first 30 % of the frames (``python
         benchmarks/nav_state.py --out bench/nav --seeds 20 [-S angular_acceleration=adaptive]``):
         envisat-tumble-64 (1°/s about a principal axis, 20 noise seeds) rate error
@@ -234,7 +235,7 @@ def relative_state(
     if process_noise not in ("physics", "poses"):
         raise ConfigError(f"process_noise must be 'physics' or 'poses', got {process_noise!r}")
     alpha = angular_acceleration
-    adaptive = isinstance(alpha, str)
+    adaptive = isinstance(alpha, str)  # the bank needs the physics noise and no caller's q
     if adaptive and alpha != "adaptive":
         raise ConfigError(f"angular_acceleration: a number, None or 'adaptive', not {alpha!r}")
     if not adaptive and alpha is not None:
@@ -268,6 +269,8 @@ def relative_state(
     if gt_poses is not None:
         T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(frames)]])
         truth = TrackTruth.from_poses(np.asarray(run.timestamps, dtype=float), T_st_gt)
+    if process_noise == "poses" or "q" in tracker_options:
+        adaptive = False
     if "q" not in tracker_options and process_noise == "poses":
         # [interpretation] process noise per frame period from the poses' own white noise: the
         # state may move by one noise step per frame, its rates by one noise step per period
@@ -293,8 +296,6 @@ def relative_state(
             "angular_acceleration": 0.0 if adaptive else float(alpha or 0.0),  # type: ignore[arg-type]
             "torque_free": adaptive or alpha is None,
         }
-    else:
-        adaptive = False  # the caller's process noise
     if filter == "ukf":
         # the navigator's slowly varying map drift is a bias of its observations, not target
         # motion: paper 2's observer-bias state absorbs it (see drift_covariance)
