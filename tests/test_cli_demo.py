@@ -70,3 +70,20 @@ def test_odometry_runs_the_navigator_by_default(tmp_path):
         app, ["odometry", str(seq), "-m", "icp-point", "--out", str(quiet), "--state"]
     )
     assert res.exit_code != 0 and "needs the navigator" in str(res.exception)
+    # relative-state options: the adaptive bank writes its members' probabilities; a wrong
+    # option is refused before the run
+    bank = tmp_path / "bank"
+    res = CliRunner().invoke(
+        app, ["odometry", str(seq), "--out", str(bank), "-S", "angular_acceleration=adaptive"]
+    )
+    assert res.exit_code == 0, res.output
+    header = (bank / "state.csv").read_text().splitlines()[0].split(",")
+    assert {"p_model0", "p_model1", "p_model2", "log_likelihood"} <= set(header)
+    bad = tmp_path / "bad"
+    res = CliRunner().invoke(app, ["odometry", str(seq), "--out", str(bad), "-S", "drift=z"])
+    assert res.exit_code != 0 and "drift" in str(res.exception)
+    assert not (bad / "estimate.tum").exists()
+    res = CliRunner().invoke(
+        app, ["odometry", str(seq), "--out", str(bad), "--no-state", "-S", "drift=map"]
+    )
+    assert res.exit_code != 0 and "needs the full state" in str(res.exception)

@@ -44,17 +44,23 @@ STATE_MAX_FRAMES = 5000
 
 
 def write_state_outputs(
-    out: Path, run: Any, gt: Any, metrics: dict[str, Any], steps: Any = None
+    out: Path,
+    run: Any,
+    gt: Any,
+    metrics: dict[str, Any],
+    steps: Any = None,
+    options: dict[str, Any] | None = None,
 ) -> list[str]:
     """The navigator's full relative state (twistor UKF on its poses): ``state.csv``,
     ``state.png`` and, with ground truth, ``state_errors.png`` (errors with ±3σ); adds the
-    state's error summary and NEES to ``metrics`` (key ``state``)."""
+    state's error summary and NEES to ``metrics`` (key ``state``). ``options`` go to
+    :func:`relnav.navigation.state.relative_state` (``angular_acceleration``, ``drift`` …)."""
     import numpy as np
 
     from relnav.cli.track import plot_track, plot_track_errors
     from relnav.navigation.state import nees_band, relative_state
 
-    result = relative_state(run, steps=steps, gt_poses=gt)
+    result = relative_state(run, steps=steps, gt_poses=gt, **(options or {}))
     result.to_csv(out / "state.csv")
     names = ["state.csv", plot_track(result, out / "state.png").name]
     if gt is not None:
@@ -89,6 +95,7 @@ def write_run_outputs(
     errors_plot: bool = True,
     extra_outputs: list[str] | None = None,
     state_steps: Any = None,
+    state_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
 
@@ -141,7 +148,7 @@ def write_run_outputs(
     frames = state_steps if state_steps is not None else run.steps
     if run.method == "relnav" and len(frames) >= 3:
         gt_n = gt[:n] if gt is not None else None
-        outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames)
+        outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames, options=state_options)
     if metrics:  # once, with the state's figures when there are some
         from relnav.atomic import atomic_write_text
         from relnav.cli.evaluate import json_safe
@@ -212,6 +219,13 @@ def odometry(
         help="Write the navigator's full relative state (state.csv, state.png, "
         f"state_errors.png); default: on for relnav up to {STATE_MAX_FRAMES} frames.",
     ),
+    state_option: list[str] = typer.Option(
+        None,
+        "--state-option",
+        "-S",
+        help="relative_state option key=value for the full state (repeatable), e.g. "
+        "angular_acceleration=adaptive, drift=map, n_mean_motion=0.0011, acceleration=1e-4.",
+    ),
     rrd: Path = typer.Option(
         None,
         "--rrd",
@@ -258,12 +272,16 @@ def odometry(
             gt_poses=seq.gt_poses,
             fallback_rrd=Path(out) / "live.rrd",
         )
-    from relnav.navigation.state import StateRecord
+    from relnav.navigation.state import StateRecord, check_state_options
 
     if state is None:
         state = name == "relnav" and n <= STATE_MAX_FRAMES
     if state and name != "relnav":
         raise ConfigError("--state needs the navigator (method relnav)")
+    state_opts = parse_options(state_option, flag="--state-option")
+    if state_opts and not state:
+        raise ConfigError("--state-option needs the full state (method relnav, --state)")
+    check_state_options(state_opts)  # before the run, not after it
     records: list[Any] | None = [] if state else None
     if name == "relnav" and n > STATE_MAX_FRAMES and not state:
         console.print(
@@ -316,6 +334,7 @@ def odometry(
         timings={"wall_s": wall},
         extra_outputs=live_file,
         state_steps=records if records is not None else [],
+        state_options=state_opts,
     )
     table = Table(title=f"odometry — {preset or name}")
     table.add_column("quantity")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -35,6 +36,7 @@ from relnav.navigation.options import MERGED_STATUSES
 
 __all__ = [
     "StateRecord",
+    "check_state_options",
     "drift_covariance",
     "map_drift_shares",
     "split_rotation_drift",
@@ -314,6 +316,17 @@ def relative_state(
         bank.append(tracker.run(run.timestamps, observations, truth=truth, meta=meta))
     labels = [f"torque-free bound × {share:g}" for share in TORQUE_FREE_SHARES]
     return mix_tracks(bank, labels)
+
+
+def check_state_options(options: dict[str, Any]) -> None:
+    """Raise :class:`~relnav.errors.ConfigError` for options :func:`relative_state` would
+    refuse (unknown names, bad values) by running it on two still frames: what a command line
+    checks before a long run rather than after it."""
+    if {"run", "steps", "gt_poses"} & set(options):
+        raise ConfigError("run, steps and gt_poses are not options of the relative state")
+    frames = [StateRecord("first", np.eye(4)), StateRecord("ok", np.eye(4))]
+    still = SimpleNamespace(steps=frames, timestamps=[0.0, 1.0], method="relnav")
+    relative_state(still, **options)
 
 
 def split_rotation_drift(Q: np.ndarray, share: float) -> tuple[np.ndarray, np.ndarray]:
