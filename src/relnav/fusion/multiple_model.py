@@ -104,11 +104,12 @@ def mix_tracks(
     pos, vel = np.full((K, 3), np.nan), np.full((K, 3), np.nan)
     om, quat = np.full((K, 3), np.nan), np.full((K, 4), np.nan)
     cov = np.full((K, 12, 12), np.nan)
-    nis, status = np.full(K, np.nan), list(first.status)
+    # the most probable member's status and NIS (no mixture of those)
+    status = [tracks[b].status[k] for k, b in enumerate(best)]
+    nis = np.array([tracks[b].nis[k] for k, b in enumerate(best)], dtype=np.float64)
     for k in range(K):
         live = [i for i in range(M) if np.all(np.isfinite(tracks[i].quat[k]))]
         if not live:
-            status[k] = tracks[best[k]].status[k]
             continue
         w = P[k, live] / P[k, live].sum()
         ref = Rotation.from_quat(tracks[best[k]].quat[k])
@@ -128,8 +129,6 @@ def mix_tracks(
         cov[k] = C + np.einsum("i,ij,ik->jk", w, D, D)
         pos[k], vel[k], om[k] = mean[0:3], mean[3:6], mean[9:12]
         quat[k] = mean_att.as_quat()
-        nis[k] = tracks[best[k]].nis[k]
-        status[k] = tracks[best[k]].status[k]
     prior = np.vstack([np.full(M, 1.0 / M), P[:-1]])
     with np.errstate(invalid="ignore", divide="ignore"):
         top = np.nanmax(L, axis=1, initial=-np.inf)

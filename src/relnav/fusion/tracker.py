@@ -312,6 +312,7 @@ class Tracker:
             self.reset()
         f = self.filter
         assert f is not None
+        self.log_likelihood = math.nan  # set again by an update
         t = float(t)
         reason = self._usable(obs)
         if not self._initialized:
@@ -399,7 +400,6 @@ class Tracker:
         rec = _TrackLog(K)
         for k in range(K):
             o = observations[k]
-            self.log_likelihood = math.nan
             st, ni = self.step(t[k], o)
             rec.record(k, self.filter, self._initialized, st, ni, o)
             rec.lam[k] = self.lam

@@ -237,10 +237,11 @@ def relative_state(
     if process_noise not in ("physics", "poses"):
         raise ConfigError(f"process_noise must be 'physics' or 'poses', got {process_noise!r}")
     alpha = angular_acceleration
-    adaptive = isinstance(alpha, str)  # the bank needs the physics noise and no caller's q
-    if adaptive and alpha != "adaptive":
+    if isinstance(alpha, str) and alpha != "adaptive":
         raise ConfigError(f"angular_acceleration: a number, None or 'adaptive', not {alpha!r}")
-    if not adaptive and alpha is not None:
+    # the bank varies the physics noise's angular acceleration: not with a caller's q
+    adaptive = alpha == "adaptive" and process_noise == "physics" and "q" not in tracker_options
+    if alpha is not None and not isinstance(alpha, str):
         alpha = float(alpha)  # type: ignore[arg-type]
         if not (np.isfinite(alpha) and alpha >= 0.0):
             raise ConfigError(f"angular_acceleration must be >= 0 rad/s², got {alpha}")
@@ -271,8 +272,6 @@ def relative_state(
     if gt_poses is not None:
         T_st_gt = np.stack([invert(T) for T in np.asarray(gt_poses)[: len(frames)]])
         truth = TrackTruth.from_poses(np.asarray(run.timestamps, dtype=float), T_st_gt)
-    if process_noise == "poses" or "q" in tracker_options:
-        adaptive = False
     if "q" not in tracker_options and process_noise == "poses":
         # [interpretation] process noise per frame period from the poses' own white noise: the
         # state may move by one noise step per frame, its rates by one noise step per period
