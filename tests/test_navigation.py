@@ -524,3 +524,65 @@ def test_relative_state_adaptive_bank_on_a_principal_axis_spin(tumble_run):
         relative_state(run, angular_acceleration="fast")
     with pytest.raises(ConfigError):
         relative_state(run, angular_acceleration=-1.0)
+
+
+def test_scale_drift_scales_translation_and_rotation_apart(rng):
+    """scale_drift: the translation and rotation variances by their scales, the lever-arm
+    correlation by the root of their product; positive semi-definite; scales 1 change nothing."""
+    from relnav.navigation.state import scale_drift
+
+    A = rng.normal(size=(6, 6))
+    Q = A @ A.T
+    S = scale_drift(Q, 0.25, 4.0)
+    np.testing.assert_allclose(S[:3, :3], 0.25 * Q[:3, :3])
+    np.testing.assert_allclose(S[3:, 3:], 4.0 * Q[3:, 3:])
+    np.testing.assert_allclose(S[:3, 3:], Q[:3, 3:])  # √(0.25 · 4) = 1
+    assert np.linalg.eigvalsh(S).min() > -1e-9
+    np.testing.assert_allclose(scale_drift(Q, 1.0, 1.0), Q)
+    np.testing.assert_allclose(scale_drift(Q, 0.0, 0.0), 0.0)
+
+
+def test_relative_state_noise_scales_on_a_short_run(tumble_run):
+    """drift_scale / drift_rotation_scale / measurement_scale: 1 is the default model; a
+    smaller drift leaves the bias less freedom (smaller attitude covariance); a smaller
+    measurement covariance raises the likelihood of the innovations when the drift explains
+    them; bad values are refused."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import StateRecord, fit_noise_scales, relative_state
+
+    seq, run = tumble_run
+    steps = [StateRecord.from_step(s) for s in run.steps]
+    base = relative_state(run, steps=steps, gt_poses=seq.gt_poses)
+    ones = relative_state(
+        run,
+        steps=steps,
+        gt_poses=seq.gt_poses,
+        drift_scale=1.0,
+        drift_rotation_scale=1.0,
+        measurement_scale=1.0,
+    )
+    np.testing.assert_array_equal(ones.covariance[-1], base.covariance[-1])
+    less = relative_state(run, steps=steps, gt_poses=seq.gt_poses, drift_scale=0.1)
+    rot = relative_state(run, steps=steps, gt_poses=seq.gt_poses, drift_rotation_scale=0.1)
+    for res in (less, rot):
+        assert np.trace(res.covariance[-1][6:9, 6:9]) < np.trace(base.covariance[-1][6:9, 6:9])
+        k0 = len(res) // 3
+        err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
+        assert np.median(err) < 0.1  # the rate is still recovered
+    # the measurement scale multiplies the scans' covariances: the innovations change
+    half = relative_state(run, steps=steps, measurement_scale=0.5)
+    assert np.nansum(half.log_likelihood) != pytest.approx(np.nansum(base.log_likelihood))
+    for bad in (
+        {"drift_scale": -1.0},
+        {"drift_rotation_scale": np.nan},
+        {"measurement_scale": 0.0},
+    ):
+        with pytest.raises(ConfigError):
+            relative_state(run, steps=steps, **bad)
+    # truth-free identification: the fitted scale is no less likely than the start
+    fit = fit_noise_scales([run], names=["measurement_scale"], max_evaluations=8)
+    assert set(fit["scales"]) == {"measurement_scale"}
+    assert fit["log_likelihood"] >= fit["start_log_likelihood"]
+    assert 1e-3 <= fit["scales"]["measurement_scale"] <= 1e3
+    with pytest.raises(ConfigError):
+        fit_noise_scales([run], names=["drift_scale"], start=[0.0])
