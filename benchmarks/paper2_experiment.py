@@ -32,6 +32,7 @@ observations, so a re-run only re-runs the filters). The recorded observations
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import tempfile
@@ -43,6 +44,11 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
+from relnav.fusion.observer_noise import (
+    CALIBRATION_FILTER_OPTIONS,
+    CONTOUR_LI_ROTATING,
+    ObserverNoise,
+)
 from relnav.fusion.tracker import (
     ContourObserver,
     Observation,
@@ -62,30 +68,67 @@ OMEGA0 = np.radians([0.0, 0.0, 5.0])  # Paper 2 Table 3
 # relnav.fusion.tracker.track_sequence, gt_alignment)
 ALIGN = "first-rotation"
 ALIGN_CENTRE = "centre"
-MAIN = "ukf+offset+bias+jackknife"
-VARIANTS: dict[str, tuple[str, dict[str, Any], bool]] = {
-    # name: (filter, tracker options, use the observer's covariance and drift)
-    "ukf (fixed R 1 cm / 1°)": ("ukf", {}, False),
-    "ukf+jackknife": ("ukf", {}, True),
-    "ukf+offset (fixed R 1 cm / 1°)": ("ukf", {"centre_offset": True}, False),
-    "ukf+offset+jackknife": ("ukf", {"centre_offset": True}, True),
-    MAIN: ("ukf", {"centre_offset": True, "observer_bias": True}, True),
+
+
+def _recording_tag(noise: ObserverNoise) -> str:
+    """Cache tag of observations recorded by the main variant with ``noise``: the contour
+    model's registration starts from the filter's prediction, so they depend on it."""
+    values = {k: v for k, v in noise.to_dict().items() if k != "source"}
+    return "cal-" + hashlib.sha1(json.dumps(values).encode()).hexdigest()[:8]
+
+
+def _noise_text(noise: ObserverNoise) -> str:
+    """One line of a noise model's 1σ values (first axis; mm and deg)."""
+    return (
+        f"white {1e3 * noise.position[0]:.2f} mm / {math.degrees(noise.attitude[0]):.3f}°, "
+        f"drift {1e3 * noise.drift_position[0]:.2f} mm / "
+        f"{math.degrees(noise.drift_attitude[0]):.3f}° per frame"
+    )
+
+
+# cache tag of the recorded observations (``obs…_src.npz``: recorded by the former main variant,
+# which fed the contour model the predictions of a filter using the jackknife covariance)
+RECORDING = _recording_tag(CONTOUR_LI_ROTATING)
+# the recording run is given Paper 2's initial rate (False: ``--rate unknown``, the run of
+# ``relnav track`` without ``--omega0``; its recordings are tagged ``…-w0``)
+RATE_GIVEN = True
+MAIN = "ukf+offset+bias+calibrated"
+# the contour observer's calibrated noise and the filter it was calibrated with
+CALIBRATED_OPTIONS: dict[str, Any] = {
+    "centre_offset": True,
+    "observer_bias": True,
+    **CALIBRATION_FILTER_OPTIONS,
+}
+VARIANTS: dict[str, tuple[str, dict[str, Any], str]] = {
+    # name: (filter, tracker options, the observations' noise: "fixed" = the filter's R,
+    # "reported" = the observer's jackknife covariance and drift, "calibrated" =
+    # relnav.fusion.observer_noise.CONTOUR_LI_ROTATING)
+    "ukf (fixed R 1 cm / 1°)": ("ukf", {}, "fixed"),
+    "ukf+jackknife": ("ukf", {}, "reported"),
+    "ukf+offset (fixed R 1 cm / 1°)": ("ukf", {"centre_offset": True}, "fixed"),
+    "ukf+offset+jackknife": ("ukf", {"centre_offset": True}, "reported"),
+    "ukf+offset+bias+jackknife": (
+        "ukf",
+        {"centre_offset": True, "observer_bias": True},
+        "reported",
+    ),
     "ukf+offset+body bias+jackknife": (
         "ukf",
         {"centre_offset": True, "observer_bias": True, "bias_frame": "body"},
-        True,
+        "reported",
     ),
     "ukf+offset+bias+jackknife+innovation": (
         "ukf",
         {"centre_offset": True, "observer_bias": True, "noise_scale": "innovation"},
-        True,
+        "reported",
     ),
-    "ukf+offset+merges+jackknife": ("ukf", {"centre_offset": True, "merge_slots": 16}, True),
-    "ekf+jackknife": ("ekf", {}, True),
-    "main, ω₀ = 0 (relnav track default)": (
+    "ukf+offset+merges+jackknife": ("ukf", {"centre_offset": True, "merge_slots": 16}, "reported"),
+    MAIN: ("ukf", CALIBRATED_OPTIONS, "calibrated"),
+    "ekf+jackknife": ("ekf", {}, "reported"),
+    "main, ω₀ unknown (relnav track default)": (
         "ukf",
-        {"centre_offset": True, "observer_bias": True, "omega0": None},
-        True,
+        {**CALIBRATED_OPTIONS, "omega0": None, "init": "rate"},
+        "calibrated",
     ),
 }
 EKF_COMPARE = ("ukf+jackknife", "ekf+jackknife")
@@ -121,6 +164,7 @@ class _Recorder:
         self.inner = inner
         self.name = inner.name
         self.observations: dict[int, Observation | None] = {}
+        self.reported: dict[int, np.ndarray | None] = {}  # the contour model's jackknife
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -128,8 +172,10 @@ class _Recorder:
 
     def observe(self, k: int, scans: dict[str, np.ndarray], prior: Any) -> Observation | None:
         self.observations[k] = None
+        self.reported[k] = None
         o = self.inner.observe(k, scans, prior)
         self.observations[k] = o
+        self.reported[k] = self.inner.model.last_covariance
         return o
 
 
@@ -174,11 +220,15 @@ def observe_seed(
     ``quality (K,)``, the truth ``T_s_target (K, 4, 4)`` and the observer's match sources
     ``W (K, K)``: ``W[k, j]`` = share of observation ``k``'s model matches contributed by the
     frame merged at step ``j``; row ``k`` all NaN when observation ``k`` carries no sources,
-    all zero for the anchor frame.
+    all zero for the anchor frame. ``R`` is the contour model's own (jackknife) covariance; the
+    main variant's run itself used the calibrated noise (``CONTOUR_LI_ROTATING``).
     """
     fname, opts, _ = VARIANTS[MAIN]
     rec = _Recorder(ContourObserver(lidar="lidar", seed=seed, model_options=model_options))
-    main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=OMEGA0, **opts)
+    if RATE_GIVEN:
+        main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=OMEGA0, **opts)
+    else:  # relnav track's default: the rate from the first two observations
+        main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=None, **opts)
     K = len(main.time)
     obs = np.full((K, 7), np.nan)
     R = np.full((K, 6, 6), np.nan)
@@ -190,8 +240,8 @@ def observe_seed(
             continue
         obs[k] = np.r_[o.position, o.quat_xyzw]
         quality[k] = o.quality
-        if o.R is not None:
-            R[k] = o.R
+        if rec.reported.get(k) is not None:
+            R[k] = rec.reported[k]
         if o.sources is not None:
             W[k] = 0.0
             for j, w in o.sources.items():
@@ -208,19 +258,27 @@ def observe_seed(
 
 
 def recorded_observations(
-    rec: dict[str, np.ndarray], use_R: bool = True, r_scale: float = 1.0, drift_scale: float = 1.0
+    rec: dict[str, np.ndarray],
+    noise: str = "reported",
+    r_scale: float = 1.0,
+    drift_scale: float = 1.0,
 ) -> list[Observation | None]:
-    """One seed's recorded observations for :meth:`Tracker.run` (``None`` where none). With
-    ``use_R`` each carries the observer's covariance × ``r_scale`` and, as the drift of the
-    observer bias, the previous observation's covariance × ``drift_scale``; with recorded
-    match sources (``W``) each carries its frame id and sources (for ``merge_slots``)."""
+    """One seed's recorded observations for :meth:`Tracker.run` (``None`` where none).
+
+    ``noise``: ``"reported"`` — each carries the observer's jackknife covariance × ``r_scale``
+    and, as the drift of the observer bias, the previous observation's covariance ×
+    ``drift_scale``; ``"calibrated"`` — ``CONTOUR_LI_ROTATING``'s white error and drift;
+    ``"fixed"`` — neither (the filter's own R). With recorded match sources (``W``) each carries
+    its frame id and sources (for ``merge_slots``)."""
+    if noise not in ("reported", "calibrated", "fixed"):
+        raise ValueError(f"noise: 'reported', 'calibrated' or 'fixed', got {noise!r}")
     obs: list[Observation | None] = []
     prev_R = None  # the drift of frame k = covariance of the previous observation
     for k in range(len(rec["time"])):
         if not np.all(np.isfinite(rec["obs"][k])):
             obs.append(None)
             continue
-        Rk = rec["R"][k] if use_R and np.all(np.isfinite(rec["R"][k])) else None
+        Rk = rec["R"][k] if noise == "reported" and np.all(np.isfinite(rec["R"][k])) else None
         W = rec.get("W")
         merged = W is not None and bool(np.all(np.isfinite(W[k])))
         o = Observation(
@@ -234,18 +292,50 @@ def recorded_observations(
         )
         prev_R = Rk
         obs.append(o)
-    return obs
+    return CONTOUR_LI_ROTATING.apply(obs) if noise == "calibrated" else obs
 
 
 def run_variants(rec: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
     """Every filter variant on one seed's recorded observations."""
     out: dict[str, dict[str, np.ndarray]] = {}
-    for name, (filt, vopts, use_R) in VARIANTS.items():
-        obs = recorded_observations(rec, use_R)
+    for name, (filt, vopts, noise) in VARIANTS.items():
+        obs = recorded_observations(rec, noise)
         res = Tracker(filt, **{"omega0": OMEGA0, **vopts}).run(rec["time"], obs)
         res.truth = _truth_for(res, rec["T_s_target"])
         out[name] = _pack(res)
     return out
+
+
+def recorded_seed(
+    seed: int,
+    work: Path,
+    frames: int = 16,
+    distance: float = 3.0,
+    sim_param: list[str] | None = None,
+    model_option: list[str] | None = None,
+) -> dict[str, np.ndarray]:
+    """Seed ``seed``'s recorded observations, from ``work``'s cache or simulated and observed
+    there (``sim_param``: scenario overrides ``KEY=VALUE``; ``model_option``: contour-model
+    options ``KEY=VALUE``, YAML values)."""
+    import yaml
+
+    sim_param, model_option = sim_param or [], model_option or []
+    tag = "_".join(p.replace("=", "-") for p in sorted(sim_param))
+    mtag = "_".join(o.replace("=", "-") for o in sorted(model_option))
+    cache = work / (
+        f"obs{seed:03d}_{frames}f_{distance:g}m{tag and '_' + tag}"
+        f"{mtag and '_model-' + mtag}_{RECORDING}{'' if RATE_GIVEN else '-w0'}.npz"
+    )
+    if cache.is_file():
+        return dict(np.load(cache))
+    ts = time.perf_counter()
+    extra = dict(p.split("=", 1) for p in sim_param)
+    seq = simulate_seed(seed, work / f"seq{seed:03d}{tag and '_' + tag}", frames, distance, extra)
+    model_options = {k: yaml.safe_load(v) for k, v in (o.split("=", 1) for o in model_option)}
+    rec = observe_seed(seed, seq, model_options)
+    rec["seconds"] = np.array(time.perf_counter() - ts)
+    np.savez(cache, **rec)
+    return rec
 
 
 def observation_check(recs: list[dict[str, np.ndarray]]) -> dict[str, Any]:
@@ -352,17 +442,29 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
     lines = [
         "# Paper 2 simulation experiment — ours vs the paper",
         "",
-        f"`python benchmarks/paper2_experiment.py --out {meta['out']} --seeds {meta['seeds']}` — "
-        f"li-rotating at {meta['distance']} m, {meta['frames']} frames at 4.5 s (5°/s about z, "
-        f"0.22 Hz), seeds {meta['first_seed']}–{meta['first_seed'] + meta['seeds'] - 1}, "
-        "ω₀ = (0, 0, 5)°/s; errors after the first "
+        f"`python benchmarks/paper2_experiment.py --out {meta['out']} --seeds {meta['seeds']}"
+        + (" --rate unknown" if meta.get("rate") == "unknown" else "")
+        + f"` — li-rotating at {meta['distance']} m, {meta['frames']} frames at 4.5 s (5°/s "
+        f"about z, 0.22 Hz), seeds {meta['first_seed']}–{meta['first_seed'] + meta['seeds'] - 1}"
+        + (
+            ", recorded by the run of `relnav track` without `--omega0` (rate from the first "
+            "two observations; the variants are run on its observations, with ω₀ = (0, 0, 5)°/s "
+            "unless named)"
+            if meta.get("rate") == "unknown"
+            else ", ω₀ = (0, 0, 5)°/s"
+        )
+        + "; errors after the first "
         f"{meta['skip']} steps. Cost: {meta['record_seconds']:.0f} s to simulate and observe all "
         f"seeds (when recorded; one process on a shared 2-core machine), {meta['seconds']:.0f} s "
         "for this run"
         + (f"; scenario overrides {meta['sim_param']}." if meta["sim_param"] else "."),
         "",
-        f"Main variant: `{MAIN}` (contour-model observations with their jackknife covariance, "
-        "centre-offset state, observer-drift bias state).",
+        f"Main variant: `{MAIN}` — `relnav track`'s default with the rate given: contour-model "
+        "observations with the calibrated noise model (`CONTOUR_LI_ROTATING`: "
+        f"{_noise_text(CONTOUR_LI_ROTATING)}; `benchmarks/paper2_calibrate.py`, seeds 20–59), "
+        "centre-offset state, observer-drift bias state in the target's axes, Student-t update "
+        "(8 dof). Observations recorded by this variant (the contour model's registration "
+        f"starts from its prediction; cache tag `{RECORDING}`); every variant runs on them.",
         "",
         "| quantity | axis | paper (max) | ours: median of per-run max | 90th pct | worst run | "
         "runs within the paper's bound |",
@@ -576,10 +678,16 @@ def main() -> None:
         default=[],
         help="contour-model option KEY=VALUE (repeatable, YAML value), e.g. facing=true",
     )
+    ap.add_argument(
+        "--rate",
+        choices=("given", "unknown"),
+        default="given",
+        help="the recording run's initial rate: Paper 2's (0, 0, 5)°/s, or unknown as in "
+        "`relnav track` without --omega0 (its first two observations give it)",
+    )
     args = ap.parse_args()
-    import yaml
-
-    model_options = {k: yaml.safe_load(v) for k, v in (o.split("=", 1) for o in args.model_option)}
+    global RATE_GIVEN
+    RATE_GIVEN = args.rate == "given"
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = None
     if args.work is None:
@@ -592,23 +700,10 @@ def main() -> None:
     runs = []
     recs = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        tag = "_".join(p.replace("=", "-") for p in sorted(args.sim_param))
-        mtag = "_".join(o.replace("=", "-") for o in sorted(args.model_option))
-        cache = work / (
-            f"obs{seed:03d}_{args.frames}f_{args.distance:g}m{tag and '_' + tag}"
-            f"{mtag and '_model-' + mtag}_src.npz"
-        )
         ts = time.perf_counter()
-        if cache.is_file():
-            rec = dict(np.load(cache))
-        else:
-            extra = dict(p.split("=", 1) for p in args.sim_param)
-            seq = simulate_seed(
-                seed, work / f"seq{seed:03d}{tag and '_' + tag}", args.frames, args.distance, extra
-            )
-            rec = observe_seed(seed, seq, model_options)
-            rec["seconds"] = np.array(time.perf_counter() - ts)
-            np.savez(cache, **rec)
+        rec = recorded_seed(
+            seed, work, args.frames, args.distance, args.sim_param, args.model_option
+        )
         r = run_variants(rec)
         runs.append(r)
         recs.append(rec)
@@ -632,6 +727,7 @@ def main() -> None:
         "skip": args.skip,
         "seconds": seconds,
         "sim_param": args.sim_param,
+        "rate": args.rate,
         "record_seconds": float(sum(float(r.get("seconds", np.nan)) for r in recs)),
     }
     (args.out / "results.json").write_text(

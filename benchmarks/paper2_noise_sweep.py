@@ -36,7 +36,7 @@ def consistency(
     """Mean NIS, mean NEES and the fraction of steps whose seed-averaged NEES is in its band."""
     nis, nees = [], []
     for rec in recs:
-        obs = recorded_observations(rec, True, a, b)
+        obs = recorded_observations(rec, "reported", a, b)
         res = Tracker(
             "ukf", omega0=OMEGA0, centre_offset=True, observer_bias=True, bias_frame=bias_frame
         ).run(rec["time"], obs)

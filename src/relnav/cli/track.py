@@ -167,6 +167,12 @@ def track(
         "-O",
         help="Filter option key=value (repeatable), e.g. -O q.attitude=1e-4 -O kappa=0.",
     ),
+    observer_noise: str = typer.Option(
+        None,
+        "--observer-noise",
+        help="Contour observer's noise: calibrated (default; Paper 2's simulation) | reported "
+        "(its jackknife covariance) | FILE.json (relnav.fusion.observer_noise.ObserverNoise).",
+    ),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="Write the PNG figures."),
 ) -> None:
     """Estimate the target's relative position, velocity, attitude and angular velocity.
@@ -204,6 +210,7 @@ def track(
             gt_alignment=gt_alignment,  # type: ignore[arg-type]
             seed=seed,
             progress=lambda i, n: bar.update(task, completed=i, total=n),
+            observer_noise=observer_noise,
             **opts,
         )
     out.mkdir(parents=True, exist_ok=True)
@@ -268,6 +275,7 @@ def track(
                     "gt_alignment": result.meta.get("gt_alignment", gt_alignment),
                     "second_sensor": second_sensor,
                     "max_frames": max_frames,
+                    "observer_noise": observer_noise,
                 },
                 sequence=ScanSequence(seq_dir),
                 seed=seed,

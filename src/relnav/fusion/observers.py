@@ -13,18 +13,21 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from relnav.errors import InputError
+from relnav.errors import ConfigError, InputError
 from relnav.fusion.dynamics import ClohessyWiltshire
 from relnav.fusion.pose_filter import quat_delta
 from relnav.fusion.track_result import TrackTruth
 from relnav.geometry.dualquat import _qmul
 from relnav.geometry.rotations import project_to_so3, quat_to_matrix
 from relnav.geometry.se3 import invert
+
+if TYPE_CHECKING:
+    from relnav.fusion.observer_noise import ObserverNoise
 
 __all__ = [
     "ContourObserver",
@@ -369,6 +372,13 @@ class ContourObserver:
         See above.
     cluster_options, model_options : dict, optional
         Passed to ``cluster_and_project`` and ``ContourModel``.
+    noise : ObserverNoise or "reported"
+        The covariance and drift each observation carries. An
+        :class:`relnav.fusion.observer_noise.ObserverNoise` (default: ``CONTOUR_LI_ROTATING``,
+        calibrated by Monte Carlo on Paper 2's simulation) gives every observation its white
+        error and, after the first, its drift. ``"reported"``: the contour model's jackknife
+        covariance of the registration, and as drift the previous observation's (5-10x too
+        small: docs/results/paper2/table.md).
     """
 
     def __init__(
@@ -380,6 +390,7 @@ class ContourObserver:
         fallback_camera_only: bool = True,
         cluster_options: dict[str, Any] | None = None,
         model_options: dict[str, Any] | None = None,
+        noise: ObserverNoise | Literal["reported"] | None = None,
     ) -> None:
         from relnav.fusion.clustering import cluster_and_project
         from relnav.fusion.cross_source import cross_source_register
@@ -394,6 +405,13 @@ class ContourObserver:
         self.seed = int(seed)
         self.fallback_camera_only = bool(fallback_camera_only)
         self.name = "contour"
+        from relnav.fusion.observer_noise import CONTOUR_LI_ROTATING, ObserverNoise
+
+        if noise is None:
+            noise = CONTOUR_LI_ROTATING
+        if not (isinstance(noise, ObserverNoise) or noise == "reported"):
+            raise ConfigError(f"noise must be an ObserverNoise or 'reported', got {noise!r}")
+        self.noise = noise
         self.n_fusion_failed = 0
         self._last_R: np.ndarray | None = None
         self._frame_of: dict[int, int] = {}  # model history index -> observer frame id k
@@ -444,10 +462,14 @@ class ContourObserver:
         if quality <= 0.0:
             reason = self.model.history[-1].get("reason", "rejected") if self.model.history else ""
             raise InputError(f"frame {k}: contour model: {reason}")
-        R = self.model.last_covariance  # None → the filter's fixed noise
-        # [interpretation] the frame merged last carries its pose error into the model, which
-        # the following registrations inherit: that is the observer's drift since then
-        drift, self._last_R = self._last_R, R
+        if self.noise == "reported":
+            R = self.model.last_covariance  # None → the filter's fixed noise
+            # [interpretation] the frame merged last carries its pose error into the model,
+            # which the following registrations inherit: that is the observer's drift since then
+            drift, self._last_R = self._last_R, R
+        else:
+            R = self.noise.white
+            drift = None if self.model.n_frames == 1 else self.noise.drift
         # the sequential model records which merged frames the registration matched
         # (first frame: the anchor, no sources; multiview: not recorded)
         src = self.model.last_sources
@@ -468,10 +490,12 @@ class ContourObserver:
         )
 
 
-def _default_observer(second: str | None, seed: int) -> Observer:
+def _default_observer(
+    second: str | None, seed: int, noise: ObserverNoise | Literal["reported"] | None = None
+) -> Observer:
     if second is not None:
         try:
-            return ContourObserver(lidar=second, seed=seed)
+            return ContourObserver(lidar=second, seed=seed, noise=noise)
         except (ImportError, TypeError) as e:  # I1's modules absent or a different API
             log.info("contour-model observer unavailable (%s); using the registration chain", e)
     return RegistrationObserver(seed=seed)

@@ -44,6 +44,7 @@ import numpy as np
 from relnav.errors import ConfigError, InputError, RelnavError
 from relnav.fusion.dynamics import mean_motion
 from relnav.fusion.ekf import QuaternionEKF
+from relnav.fusion.observer_noise import CALIBRATION_FILTER_OPTIONS, ObserverNoise
 from relnav.fusion.observers import (
     ContourObserver,
     Observation,
@@ -178,9 +179,15 @@ class Tracker:
         Initial velocity, m/s (default zero).
     min_quality : float
         Observations with ``quality`` below this are rejected (flagged).
-    init : {"first", "prior"}
+    init : {"first", "rate", "prior"}
         ``"first"``: initialize position and attitude from the first usable observation (steps
-        before it are ``"waiting"``); ``"prior"``: start from the filter's initial state
+        before it are ``"waiting"``); ``"rate"`` **[interpretation, not in Paper 2]**: as
+        ``"first"``, then at the second usable observation the filter starts again from the
+        first one with the attitude change between them as its body rate, ``log(q₀⁻¹ q₁)/Δt``
+        (the shortest rotation: a target turning less than 180° between them), and takes the
+        second as its first update — for a target whose rate is unknown (no ``omega0``): a
+        zero initial rate reads the first turns of a reference point circling the spin axis as
+        velocity; ``"prior"``: start from the filter's initial state
         (``position0``/``quat0`` in ``filter_options``).
     noise_scale : {"fixed", "innovation"}
         ``"fixed"``: each update uses the observation's covariance (or the filter's ``r``) as
@@ -212,7 +219,7 @@ class Tracker:
         omega0: Any = None,
         velocity0: Any = None,
         min_quality: float = 0.0,
-        init: Literal["first", "prior"] = "first",
+        init: Literal["first", "rate", "prior"] = "first",
         noise_scale: Literal["fixed", "innovation"] = "fixed",
         **filter_options: Any,
     ) -> None:
@@ -221,8 +228,10 @@ class Tracker:
         n = 0.0 if n_mean_motion is None else float(n_mean_motion)
         if orbit_radius_m is not None:
             n = mean_motion(orbit_radius_m)
-        if init not in ("first", "prior"):
-            raise ConfigError(f"init must be 'first' or 'prior', got {init!r}")
+        if init not in ("first", "rate", "prior"):
+            raise ConfigError(f"init must be 'first', 'rate' or 'prior', got {init!r}")
+        if init == "rate" and omega0 is not None:
+            raise ConfigError("init='rate' estimates the initial rate: give no omega0")
         self.filter_name = str(filter).lower()
         self.n_mean_motion = n
         self.dt = dt
@@ -259,6 +268,7 @@ class Tracker:
         )
         self._t = None
         self._initialized = self.init == "prior"
+        self._first: tuple[float, Observation] | None = None  # init="rate": held observation
         self.lam = 1.0
         self._innov = []
 
@@ -328,7 +338,19 @@ class Tracker:
             )
             self._initialized = True
             self._t = t
+            self._first = (t, obs) if self.init == "rate" else None
             return "init", math.nan
+        if self._first is not None and not reason and math.isfinite(t) and t > self._first[0]:
+            # init="rate": start again from the first observation, with the rate the second shows
+            assert obs is not None
+            t0, o0 = self._first
+            f.initialize(
+                o0.position,
+                o0.quat_xyzw,
+                velocity=self.velocity0,
+                omega=_rate_between(o0.quat_xyzw, obs.quat_xyzw, t - t0),
+            )
+            self._t, self._first = t0, None
         if not math.isfinite(t) or (self._t is not None and t < self._t):
             return f"flagged: time {t!r} not after {self._t!r}", math.nan
         if self._t is not None:
@@ -408,6 +430,30 @@ class Tracker:
                 progress(k + 1, K)
         assert self.filter is not None
         return rec.result(t, self.filter_name, self.filter.settings(), truth, dict(meta or {}))
+
+
+def _rate_between(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
+    """Body rate (rad/s) turning attitude ``q0`` into ``q1`` (xyzw, ``R_sensor_body``) in
+    ``dt`` s: ``log(q₀⁻¹ q₁)/dt``, the shortest rotation."""
+    from scipy.spatial.transform import Rotation
+
+    r = Rotation.from_quat(q0).inv() * Rotation.from_quat(q1)
+    return r.as_rotvec() / float(dt)
+
+
+def _observer_noise(
+    value: ObserverNoise | Literal["reported"] | str | Path | None,
+) -> ObserverNoise | Literal["reported"] | None:
+    """``track_sequence``'s ``observer_noise`` as the contour observer takes it."""
+    if value is None or isinstance(value, ObserverNoise):
+        return value
+    if isinstance(value, str) and value in ("calibrated", "reported"):
+        return None if value == "calibrated" else "reported"
+    if isinstance(value, str | Path):
+        return ObserverNoise.load(value)
+    raise ConfigError(
+        f"observer_noise: expected a model, 'calibrated', 'reported' or a path, got {value!r}"
+    )
 
 
 def _align_truth(
@@ -495,6 +541,7 @@ def track_sequence(
     gt_alignment: Literal["auto", "mean", "first", "first-rotation", "centre", "none"] = "auto",
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    observer_noise: ObserverNoise | Literal["reported"] | str | Path | None = None,
     **tracker_options: Any,
 ) -> TrackResult:
     """Track the target over a sequence folder (primary camera + optional second sensor).
@@ -530,13 +577,20 @@ def track_sequence(
         Seed of the observer's random choices (recorded in ``meta``).
     progress : callable, optional
         ``progress(done, total)``.
+    observer_noise : ObserverNoise, "calibrated", "reported" or path, optional
+        The contour observer's noise (:class:`ContourObserver` ``noise``): ``None`` or
+        ``"calibrated"`` = :data:`relnav.fusion.observer_noise.CONTOUR_LI_ROTATING`, a path =
+        a JSON model (:meth:`ObserverNoise.save`). Only with the contour observer built here.
     **tracker_options
         Passed to :class:`Tracker` (``n_mean_motion``, ``orbit_radius_m``, ``q``, ``r`` …).
         With the UKF and the contour observer, ``centre_offset`` and ``observer_bias`` default
         to ``True`` (:class:`relnav.fusion.ukf.TwistorUKF`): its reference point is the first
-        frame's centroid, which circles the spin axis, and its model drifts. With
-        ``merge_slots`` > 0 the merge states replace the bias (``observer_bias`` then defaults
-        to ``False``).
+        frame's centroid, which circles the spin axis, and its model drifts; with a calibrated
+        noise model (not ``"reported"``) also the options it was calibrated with,
+        ``bias_frame="body"`` and ``robust_dof=8``. Without ``omega0`` (an unknown rate)
+        ``init`` defaults to ``"rate"``: the initial rate from the first two observations.
+        With ``merge_slots`` > 0 the merge states replace the bias (``observer_bias`` then
+        defaults to ``False``).
 
     Returns
     -------
@@ -567,13 +621,14 @@ def track_sequence(
     times = cam.timestamps[:n]
     assoc = _associate(times, sec.timestamps) if sec is not None else None
 
+    noise = _observer_noise(observer_noise)
     if observer is None:
-        obs_impl: Observer = _default_observer(second, seed)
+        obs_impl: Observer = _default_observer(second, seed, noise)
     elif isinstance(observer, str):
         if observer == "contour":
             if second is None:
                 raise InputError("the contour observer needs a second sensor (scans_<name>/)")
-            obs_impl = ContourObserver(lidar=second, seed=seed)
+            obs_impl = ContourObserver(lidar=second, seed=seed, noise=noise)
         elif observer.startswith("registration"):
             _, _, method = observer.partition(":")
             obs_impl = RegistrationObserver(method or "icp-point", seed=seed)
@@ -583,12 +638,19 @@ def track_sequence(
             )
     else:
         obs_impl = observer
+    if observer_noise is not None and not isinstance(obs_impl, ContourObserver):
+        raise ConfigError("observer_noise is an option of the contour observer")
 
     if str(filter).lower() == "ukf" and isinstance(obs_impl, ContourObserver):
         # the contour model's reference point circles the spin axis and the model drifts
         tracker_options.setdefault("centre_offset", True)
         if not tracker_options.get("merge_slots"):  # the merge states replace the bias
             tracker_options.setdefault("observer_bias", True)
+            if obs_impl.noise != "reported":  # the filter its noise was calibrated with
+                for key, value in CALIBRATION_FILTER_OPTIONS.items():
+                    tracker_options.setdefault(key, value)
+    if tracker_options.get("omega0") is None and tracker_options.get("init", "first") == "first":
+        tracker_options["init"] = "rate"  # an unknown rate: from the first two attitudes
     tracker = Tracker(filter, **tracker_options)
     steps = np.diff(times)
     steps = steps[steps > 0]
@@ -638,6 +700,9 @@ def track_sequence(
         "gt_alignment": gt_alignment,
         "observer_stats": dict(getattr(obs_impl, "stats", {}) or {}),
     }
+    if isinstance(obs_impl, ContourObserver):  # the noise the observations carried
+        n_ = obs_impl.noise
+        meta["observer_noise"] = n_ if isinstance(n_, str) else n_.to_dict()
     if gt_alignment == "auto":
         gt_alignment = "centre" if getattr(f, "centre_offset", False) else "mean"
         meta["gt_alignment"] = gt_alignment
