@@ -33,7 +33,8 @@ innovations on the SUITE sequence envisat-tumble-64's N runs, without ground tru
 reports both sequences with them (aura-tumble-64 is held out: only checked).
 
 ``-S key=value`` passes an option to :func:`relnav.navigation.state.relative_state` (numbers
-are read as floats, ``none`` as None), e.g. ``-S drift=map``, ``-S robust_dof=5`` or
+are read as floats, ``none`` as None), e.g. ``-S drift=map``, ``-S robust_dof=5``,
+``-S initial_bias=10`` (the start-up frames' drift as the map's initial offset) or
 ``-S angular_acceleration=none`` (the torque-free bound alone instead of the adaptive bank).
 """
 

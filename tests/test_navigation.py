@@ -586,3 +586,61 @@ def test_relative_state_noise_scales_on_a_short_run(tumble_run):
     assert 1e-3 <= fit["scales"]["measurement_scale"] <= 1e3
     with pytest.raises(ConfigError):
         fit_noise_scales([run], names=["drift_scale"], start=[0.0])
+
+
+def test_startup_bias_sums_the_start_up_steps(rng):
+    """startup_bias: the first update takes the sum of the start-up frames' drift (merged
+    frames after the first, non-merged ones skipped), block diagonal and positive
+    semi-definite; no frames, no covariance."""
+    from relnav.navigation.state import StateRecord, drift_covariance, startup_bias
+
+    frames = [StateRecord("first", np.eye(4))]
+    for k in range(6):
+        A = rng.normal(size=(6, 6)) * 1e-2
+        pose = exp_se3(rng.normal(size=6) * 0.3)
+        frames.append(StateRecord("failed" if k == 2 else "ok", pose, None, A @ A.T))
+    start_up, C = startup_bias(frames, 3)
+    assert start_up == [1, 2, 4]
+    expected = sum(drift_covariance(frames[k].step_covariance, frames[k].pose) for k in (1, 2, 4))
+    np.testing.assert_allclose(C[3:, 3:], expected[3:, 3:], atol=1e-15)
+    # the translation blocks summed in target axes, given in the first update's sensor axes
+    in_target = sum(
+        frames[k].pose[:3, :3]
+        @ drift_covariance(frames[k].step_covariance, frames[k].pose)[:3, :3]
+        @ frames[k].pose[:3, :3].T
+        for k in (1, 2, 4)
+    )
+    R_st = frames[1].pose[:3, :3].T
+    np.testing.assert_allclose(C[:3, :3], R_st @ in_target @ R_st.T, atol=1e-15)
+    assert np.trace(C[:3, :3]) == pytest.approx(np.trace(expected[:3, :3]))
+    np.testing.assert_array_equal(C[:3, 3:], 0.0)
+    assert np.linalg.eigvalsh(C).min() > -1e-15
+    # the map's share of the rotation (drift="map") lowers the rotation block
+    shared, C_map = startup_bias(frames, 3, np.full(len(frames), 0.5))
+    assert shared == start_up and np.trace(C_map[3:, 3:]) < np.trace(C[3:, 3:])
+    none, C0 = startup_bias(frames, 0)
+    assert none == [] and not C0.any()
+
+
+def test_relative_state_initial_bias_on_a_short_run(tumble_run):
+    """initial_bias=N: the map's offset is uncertain from the first update on (larger attitude
+    covariance there than the default's), the rate is still recovered; 0 is the default;
+    bad values are refused."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import StateRecord, relative_state
+
+    seq, run = tumble_run
+    steps = [StateRecord.from_step(s) for s in run.steps]
+    base = relative_state(run, steps=steps, gt_poses=seq.gt_poses)
+    zero = relative_state(run, steps=steps, gt_poses=seq.gt_poses, initial_bias=0)
+    np.testing.assert_array_equal(zero.covariance[-1], base.covariance[-1])
+    start = relative_state(run, steps=steps, gt_poses=seq.gt_poses, initial_bias=5.0)
+    k1 = base.status.index("update")  # the first update
+    att = slice(6, 9)
+    assert np.trace(start.covariance[k1][att, att]) > np.trace(base.covariance[k1][att, att])
+    k0 = len(start) // 3
+    err = np.degrees(np.linalg.norm(start.errors()["omega"][k0:], axis=1))
+    assert np.median(err) < 0.1 and np.max(err) < 0.2
+    for bad in (-1, 2.5, True, "startup"):
+        with pytest.raises(ConfigError):
+            relative_state(run, steps=steps, initial_bias=bad)
