@@ -34,11 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import paper2_experiment as pe
 from relnav.fusion.observer_noise import (
     CalibrationRun,
-    ObserverNoise,
     calibrate_observer_noise,
-    consistency_of,
+    evaluate_observer_noise,
 )
-from relnav.fusion.tracker import Tracker
 
 
 def _span(text: str) -> range:
@@ -62,15 +60,6 @@ def runs_of(seeds: range, work: Path, recording: str) -> list[CalibrationRun]:
             )
         )
     return out
-
-
-def check(model: ObserverNoise, runs: list[CalibrationRun], options: dict) -> dict:
-    results = []
-    for run in runs:
-        res = Tracker(**options).run(run.times, model.apply(run.observations))
-        res.truth = run.truth(res)
-        results.append(res)
-    return consistency_of(results)
 
 
 def main() -> None:
@@ -106,11 +95,11 @@ def main() -> None:
     for label, runs in ((args.seeds, cal), (args.check, held)):
         for known in (True, False):
             opts = options if known else {**options, "omega0": None, "init": "rate"}
-            c = check(model, runs, opts)
+            c = evaluate_observer_noise(model, runs, opts)
             lo6, hi6 = pe._band(6, c["nis_n"])
             lo12, hi12 = pe._band(12, c["nees_n"])
             print(
-                f"| {label.start}-{label.stop - 1} | {'(0,0,5)°/s' if known else '0'} "
+                f"| {label.start}-{label.stop - 1} | {'(0,0,5)°/s' if known else 'unknown'} "
                 f"| {c['nis']:.2f} [{lo6:.2f}, {hi6:.2f}] | {c['nees']:.2f} [{lo12:.2f}, "
                 f"{hi12:.2f}] | {' / '.join(f'{x:.2f}' for x in c['blocks'])} |"
             )

@@ -18,10 +18,9 @@ from relnav.fusion.observer_noise import (
     CalibrationRun,
     ObserverNoise,
     calibrate_observer_noise,
-    consistency_of,
+    evaluate_observer_noise,
 )
 from relnav.fusion.observers import Observation, simulate_observations
-from relnav.fusion.tracker import Tracker
 
 OMEGA0 = np.radians([0.0, 0.0, 5.0])
 OPTIONS = {
@@ -57,12 +56,7 @@ def _drifting_run(seed: int, model: ObserverNoise = TRUE, steps: int = 16) -> Ca
 
 
 def _consistency(model: ObserverNoise, runs: list[CalibrationRun]) -> dict:
-    results = []
-    for run in runs:
-        res = Tracker(**OPTIONS).run(run.times, model.apply(run.observations))
-        res.truth = run.truth(res)
-        results.append(res)
-    return consistency_of(results)
+    return evaluate_observer_noise(model, runs, OPTIONS)
 
 
 def test_observer_noise_values_and_apply() -> None:

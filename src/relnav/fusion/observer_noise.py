@@ -45,6 +45,7 @@ __all__ = [
     "ObserverNoise",
     "calibrate_observer_noise",
     "consistency_of",
+    "evaluate_observer_noise",
 ]
 
 log = logging.getLogger(__name__)
@@ -229,6 +230,23 @@ def consistency_of(results: Sequence[Any]) -> dict[str, Any]:
         }
 
 
+def evaluate_observer_noise(
+    model: ObserverNoise, runs: Sequence[CalibrationRun], tracker_options: dict[str, Any]
+) -> dict[str, Any]:
+    """Track every run with ``model``'s noise (:class:`relnav.fusion.tracker.Tracker` with
+    ``tracker_options``) and return :func:`consistency_of` the results (the truth of the runs
+    that have one attached)."""
+    from relnav.fusion.tracker import Tracker
+
+    results = []
+    for run in runs:
+        res = Tracker(**tracker_options).run(run.times, model.apply(run.observations))
+        if run.truth is not None:
+            res.truth = run.truth(res)
+        results.append(res)
+    return consistency_of(results)
+
+
 def _model_of(theta: np.ndarray, per_axis: bool, source: str) -> ObserverNoise:
     s = np.exp(theta)
     if not per_axis:
@@ -289,8 +307,6 @@ def calibrate_observer_noise(
     """
     from scipy.optimize import minimize
 
-    from relnav.fusion.tracker import Tracker
-
     if not runs:
         raise InputError("calibrate_observer_noise needs at least one run")
     if fit not in ("consistency", "likelihood"):
@@ -305,17 +321,8 @@ def calibrate_observer_noise(
     theta0 = np.log(v0 if per_axis else v0[[0, 3, 6, 9]])
     source = f"calibrated ({fit}, {len(runs)} runs)"
 
-    def track_all(model: ObserverNoise) -> dict[str, Any]:
-        results = []
-        for run in runs:
-            res = Tracker(**tracker_options).run(run.times, model.apply(run.observations))
-            if run.truth is not None:
-                res.truth = run.truth(res)
-            results.append(res)
-        return consistency_of(results)
-
     def objective(theta: np.ndarray) -> float:
-        c = track_all(_model_of(theta, per_axis, source))
+        c = evaluate_observer_noise(_model_of(theta, per_axis, source), runs, tracker_options)
         if fit == "likelihood":
             return -c["log_likelihood"] if math.isfinite(c["log_likelihood"]) else 1e300
         terms = [c["nis"] / 6.0, c["nees"] / 12.0]
@@ -331,7 +338,11 @@ def calibrate_observer_noise(
         options={"xatol": 0.01, "fatol": 1e-4, "maxfev": int(max_evaluations), "adaptive": True},
     )
     model = _model_of(opt.x, per_axis, source)
-    report = {"objective": float(opt.fun), "evaluations": int(opt.nfev), **track_all(model)}
+    report = {
+        "objective": float(opt.fun),
+        "evaluations": int(opt.nfev),
+        **evaluate_observer_noise(model, runs, tracker_options),
+    }
     log.info("observer noise calibrated: %s (%s)", model.to_dict(), report)
     return model, report
 
