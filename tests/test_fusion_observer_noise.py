@@ -150,9 +150,10 @@ def test_contour_observer_and_track_sequence_noise_options(tmp_path: Path) -> No
     with pytest.raises(ConfigError):
         ContourObserver(noise="jackknife")  # type: ignore[arg-type]
     assert set(CALIBRATION_FILTER_OPTIONS) == {"bias_frame", "robust_dof"}
-    (tmp_path / "seq" / "scans").mkdir(parents=True)
-    with pytest.raises((ConfigError, InputError)):
+    with pytest.raises(ConfigError, match="contour observer"):
         track_sequence(tmp_path / "seq", observer="registration", observer_noise="reported")
+    with pytest.raises(InputError, match="observer noise"):  # checked before any work
+        track_sequence(tmp_path / "seq", observer_noise=tmp_path / "none.json")
 
 
 @pytest.mark.slow

@@ -604,6 +604,10 @@ def track_sequence(
     """
     from relnav.io.sequences import ScanSequence
 
+    if observer_noise is not None and observer is not None and observer != "contour":
+        if not isinstance(observer, ContourObserver):
+            raise ConfigError("observer_noise is an option of the contour observer")
+    noise = _observer_noise(observer_noise)
     folder = Path(seq_dir)
     cam = ScanSequence(folder)
     if len(cam) == 0:
@@ -621,7 +625,6 @@ def track_sequence(
     times = cam.timestamps[:n]
     assoc = _associate(times, sec.timestamps) if sec is not None else None
 
-    noise = _observer_noise(observer_noise)
     if observer is None:
         obs_impl: Observer = _default_observer(second, seed, noise)
     elif isinstance(observer, str):
