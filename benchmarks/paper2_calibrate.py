@@ -1,7 +1,8 @@
 """Calibrate the contour observer's noise model on Paper 2's simulation (issue 15).
 
     python benchmarks/paper2_calibrate.py --work WORK --seeds 20:60 --check 0:20 [--per-axis]
-        [--fit consistency|likelihood] [--recording src|cal] [--save noise.json]
+        [--fit consistency|likelihood] [--recording src|cal] [--rate given|unknown|both]
+        [--save noise.json]
 
 Loads (or simulates and records, as ``paper2_experiment.py --work WORK`` does) the contour
 observer's output on the ``li-rotating`` run of each calibration seed, then chooses the noise
@@ -9,8 +10,8 @@ model (:func:`relnav.fusion.observer_noise.calibrate_observer_noise`) with the f
 default ``relnav track`` uses with that observer (centre offset, observer bias in body axes,
 Student-t update; ω₀ = (0, 0, 5)°/s as Paper 2). Prints the model (the values of
 ``CONTOUR_LI_ROTATING``) and the mean NIS / NEES with their 95 % bands on the calibration seeds
-and on the ``--check`` seeds (held out), with ω₀ known and unknown (``relnav track``'s default:
-``init="rate"``).
+and on the ``--check`` seeds (held out), for each recording loop calibrated on (``--rate``:
+Paper 2's initial rate, ``relnav track`` without ``--omega0``, or both).
 
 The contour model's registration starts from the filter's prediction, so the observations
 depend on the noise model the filter ran with: ``--recording cal`` (default) uses those recorded
@@ -44,10 +45,14 @@ def _span(text: str) -> range:
     return range(int(a), int(b))
 
 
-def runs_of(seeds: range, work: Path, recording: str) -> list[CalibrationRun]:
-    """Calibration runs (observations without covariance, truth by the experiment's alignment)."""
+def runs_of(seeds: range, work: Path, recording: str, rate: str = "given") -> list[CalibrationRun]:
+    """Calibration runs (observations without covariance, truth by the experiment's alignment)
+    of the recording loop with the rate ``given`` or ``unknown`` (then tracked as that loop:
+    ``omega0=None, init="rate"``)."""
     if recording == "src":
         pe.RECORDING = "src"
+    pe.RATE_GIVEN = rate == "given"
+    options = None if rate == "given" else {"omega0": None, "init": "rate"}
     out = []
     for seed in seeds:
         rec = pe.recorded_seed(seed, work)
@@ -57,6 +62,7 @@ def runs_of(seeds: range, work: Path, recording: str) -> list[CalibrationRun]:
                 rec["time"],
                 pe.recorded_observations(rec, "fixed"),
                 truth=lambda res, T=T: pe._truth_for(res, T),
+                options=options,
             )
         )
     return out
@@ -70,16 +76,32 @@ def main() -> None:
     ap.add_argument("--fit", choices=("consistency", "likelihood"), default="consistency")
     ap.add_argument("--per-axis", action="store_true", help="12 values instead of 4")
     ap.add_argument("--recording", choices=("src", "cal"), default="cal")
+    ap.add_argument(
+        "--rate",
+        choices=("given", "unknown", "both"),
+        default="given",
+        help="the recording loops calibrated on: Paper 2's initial rate, `relnav track` without "
+        "--omega0 (paper2_experiment.py --rate unknown), or both",
+    )
     ap.add_argument("--save", type=Path, default=None, help="write the model as JSON")
     args = ap.parse_args()
     warnings.simplefilter("ignore", RuntimeWarning)
     options = {"filter": "ukf", "omega0": pe.OMEGA0, **pe.CALIBRATED_OPTIONS}
-    cal = runs_of(args.seeds, args.work, args.recording)
+    loops = ("given", "unknown") if args.rate == "both" else (args.rate,)
+    cal = {r: runs_of(args.seeds, args.work, args.recording, r) for r in loops}
     t0 = time.perf_counter()
-    model, report = calibrate_observer_noise(cal, options, fit=args.fit, per_axis=args.per_axis)
+    model, report = calibrate_observer_noise(
+        [run for runs in cal.values() for run in runs],
+        options,
+        fit=args.fit,
+        per_axis=args.per_axis,
+    )
     seeds = f"{args.seeds.start}-{args.seeds.stop - 1}"
     seconds = time.perf_counter() - t0
-    print(f"calibrated on seeds {seeds} ({report['evaluations']} evaluations, {seconds:.0f} s):")
+    print(
+        f"calibrated on seeds {seeds}, rate {args.rate} ({report['evaluations']} evaluations, "
+        f"{seconds:.0f} s):"
+    )
     d = model.to_dict()
     mm = lambda key: np.round(1e3 * np.asarray(d[key]), 3)  # noqa: E731
     deg = lambda key: np.round(np.degrees(d[key]), 4)  # noqa: E731
@@ -89,17 +111,16 @@ def main() -> None:
     print("  exact values (m, rad):", d)
     if args.save:
         model.save(args.save)
-    held = runs_of(args.check, args.work, args.recording)
-    print("\n| seeds | ω₀ | mean NIS [95 % band] | mean NEES [95 % band] | NEES blocks p/v/att/ω |")
+    print("\n| seeds | rate | mean NIS [95 % band] | mean NEES [95 % band] | blocks p/v/att/ω |")
     print("|---|---|---|---|---|")
-    for label, runs in ((args.seeds, cal), (args.check, held)):
-        for known in (True, False):
-            opts = options if known else {**options, "omega0": None, "init": "rate"}
-            c = evaluate_observer_noise(model, runs, opts)
+    for label in (args.seeds, args.check):
+        for r in loops:
+            runs = cal[r] if label is args.seeds else runs_of(label, args.work, args.recording, r)
+            c = evaluate_observer_noise(model, runs, options)
             lo6, hi6 = pe._band(6, c["nis_n"])
             lo12, hi12 = pe._band(12, c["nees_n"])
             print(
-                f"| {label.start}-{label.stop - 1} | {'(0,0,5)°/s' if known else 'unknown'} "
+                f"| {label.start}-{label.stop - 1} | {r} "
                 f"| {c['nis']:.2f} [{lo6:.2f}, {hi6:.2f}] | {c['nees']:.2f} [{lo12:.2f}, "
                 f"{hi12:.2f}] | {' / '.join(f'{x:.2f}' for x in c['blocks'])} |"
             )

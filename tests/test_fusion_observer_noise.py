@@ -129,6 +129,18 @@ def test_likelihood_calibration_needs_no_truth() -> None:
     assert report["log_likelihood"] > worse
 
 
+def test_a_run_can_carry_its_own_tracker_options() -> None:
+    """A run recorded with the rate unknown is tracked as such (its options over the common)."""
+    run = _drifting_run(0, steps=8)
+    known = evaluate_observer_noise(TRUE, [run], OPTIONS)
+    run.options = {"omega0": None, "init": "rate"}
+    unknown = evaluate_observer_noise(TRUE, [run], OPTIONS)
+    assert known["nis_n"] == unknown["nis_n"] == 7 and known["nis"] != unknown["nis"]
+    run.options = {"init": "bogus"}
+    with pytest.raises(ConfigError):
+        evaluate_observer_noise(TRUE, [run], OPTIONS)
+
+
 def test_calibration_input_errors() -> None:
     run = _drifting_run(0, steps=4)
     with pytest.raises(InputError):

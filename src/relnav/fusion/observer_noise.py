@@ -189,11 +189,15 @@ class CalibrationRun:
         ``truth(result) -> TrackTruth``: the truth expressed in the estimate's body frame (it may
         depend on the estimate, e.g. the first observation's axes); needed by
         ``fit="consistency"``.
+    options : dict, optional
+        Tracker options of this run, over the common ones (e.g. ``omega0=None,
+        init="rate"`` for a run whose rate was unknown).
     """
 
     times: np.ndarray
     observations: list[Observation | None]
     truth: Callable[[Any], Any] | None = None
+    options: dict[str, Any] | None = None
 
 
 def consistency_of(results: Sequence[Any]) -> dict[str, Any]:
@@ -240,7 +244,8 @@ def evaluate_observer_noise(
 
     results = []
     for run in runs:
-        res = Tracker(**tracker_options).run(run.times, model.apply(run.observations))
+        opts = {**tracker_options, **(run.options or {})}
+        res = Tracker(**opts).run(run.times, model.apply(run.observations))
         if run.truth is not None:
             res.truth = run.truth(res)
         results.append(res)
