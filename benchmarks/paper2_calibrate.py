@@ -49,13 +49,11 @@ def runs_of(seeds: range, work: Path, recording: str, rate: str = "given") -> li
     """Calibration runs (observations without covariance, truth by the experiment's alignment)
     of the recording loop with the rate ``given`` or ``unknown`` (then tracked as that loop:
     ``omega0=None, init="rate"``)."""
-    if recording == "src":
-        pe.RECORDING = "src"
-    pe.RATE_GIVEN = rate == "given"
+    tag = "src" if recording == "src" else pe.RECORDING
     options = None if rate == "given" else {"omega0": None, "init": "rate"}
     out = []
     for seed in seeds:
-        rec = pe.recorded_seed(seed, work)
+        rec = pe.recorded_seed(seed, work, rate_given=rate == "given", recording=tag)
         T = rec["T_s_target"]
         out.append(
             CalibrationRun(

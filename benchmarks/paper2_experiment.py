@@ -89,9 +89,6 @@ def _noise_text(noise: ObserverNoise) -> str:
 # cache tag of the recorded observations (``obs…_src.npz``: recorded by the former main variant,
 # which fed the contour model the predictions of a filter using the jackknife covariance)
 RECORDING = _recording_tag(CONTOUR_LI_ROTATING)
-# the recording run is given Paper 2's initial rate (False: ``--rate unknown``, the run of
-# ``relnav track`` without ``--omega0``; its recordings are tagged ``…-w0``)
-RATE_GIVEN = True
 MAIN = "ukf+offset+bias+calibrated"
 # the contour observer's calibrated noise and the filter it was calibrated with
 CALIBRATED_OPTIONS: dict[str, Any] = {
@@ -188,8 +185,7 @@ def _truth_for(res: TrackResult, T_s_target: np.ndarray) -> TrackTruth:
 def _pack(res: TrackResult) -> dict[str, np.ndarray]:
     e = res.errors()
     sig = res.sigma()
-    upd = np.array([s == "update" for s in res.status])
-    est = np.array([s not in ("init", "waiting") for s in res.status])
+    upd, est = res.updated, res.estimated
     out = {f"err_{k}": v for k, v in e.items()}
     out.update({f"sig_{k}": v for k, v in sig.items()})
     out.update(
@@ -211,10 +207,15 @@ def _pack(res: TrackResult) -> dict[str, np.ndarray]:
 
 
 def observe_seed(
-    seed: int, seq: Path, model_options: dict[str, Any] | None = None
+    seed: int,
+    seq: Path,
+    model_options: dict[str, Any] | None = None,
+    rate_given: bool = True,
 ) -> dict[str, np.ndarray]:
     """Run the main variant through the whole chain and record its observations
-    (``model_options``: passed to the contour model, :class:`relnav.fusion.ContourModel`).
+    (``model_options``: passed to the contour model, :class:`relnav.fusion.ContourModel`;
+    ``rate_given=False``: without Paper 2's initial rate, as ``relnav track`` without
+    ``--omega0``, whose first two observations give it).
 
     Returns arrays ``time (K,)``, ``obs (K, 7)`` (NaN = none), ``R (K, 6, 6)`` (NaN = none),
     ``quality (K,)``, the truth ``T_s_target (K, 4, 4)`` and the observer's match sources
@@ -225,10 +226,8 @@ def observe_seed(
     """
     fname, opts, _ = VARIANTS[MAIN]
     rec = _Recorder(ContourObserver(lidar="lidar", seed=seed, model_options=model_options))
-    if RATE_GIVEN:
-        main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=OMEGA0, **opts)
-    else:  # relnav track's default: the rate from the first two observations
-        main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=None, **opts)
+    omega0 = OMEGA0 if rate_given else None
+    main = track_sequence(seq, filter=fname, observer=rec, seed=seed, omega0=omega0, **opts)
     K = len(main.time)
     obs = np.full((K, 7), np.nan)
     R = np.full((K, 6, 6), np.nan)
@@ -313,10 +312,15 @@ def recorded_seed(
     distance: float = 3.0,
     sim_param: list[str] | None = None,
     model_option: list[str] | None = None,
+    *,
+    rate_given: bool = True,
+    recording: str = RECORDING,
 ) -> dict[str, np.ndarray]:
     """Seed ``seed``'s recorded observations, from ``work``'s cache or simulated and observed
     there (``sim_param``: scenario overrides ``KEY=VALUE``; ``model_option``: contour-model
-    options ``KEY=VALUE``, YAML values)."""
+    options ``KEY=VALUE``, YAML values; ``rate_given``: see :func:`observe_seed`, recordings
+    without the rate are tagged ``…-w0``; ``recording``: the cache tag, ``"src"`` for those
+    of the former main variant)."""
     import yaml
 
     sim_param, model_option = sim_param or [], model_option or []
@@ -324,7 +328,7 @@ def recorded_seed(
     mtag = "_".join(o.replace("=", "-") for o in sorted(model_option))
     cache = work / (
         f"obs{seed:03d}_{frames}f_{distance:g}m{tag and '_' + tag}"
-        f"{mtag and '_model-' + mtag}_{RECORDING}{'' if RATE_GIVEN else '-w0'}.npz"
+        f"{mtag and '_model-' + mtag}_{recording}{'' if rate_given else '-w0'}.npz"
     )
     if cache.is_file():
         return dict(np.load(cache))
@@ -332,7 +336,7 @@ def recorded_seed(
     extra = dict(p.split("=", 1) for p in sim_param)
     seq = simulate_seed(seed, work / f"seq{seed:03d}{tag and '_' + tag}", frames, distance, extra)
     model_options = {k: yaml.safe_load(v) for k, v in (o.split("=", 1) for o in model_option)}
-    rec = observe_seed(seed, seq, model_options)
+    rec = observe_seed(seed, seq, model_options, rate_given)
     rec["seconds"] = np.array(time.perf_counter() - ts)
     np.savez(cache, **rec)
     return rec
@@ -686,8 +690,6 @@ def main() -> None:
         "`relnav track` without --omega0 (its first two observations give it)",
     )
     args = ap.parse_args()
-    global RATE_GIVEN
-    RATE_GIVEN = args.rate == "given"
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = None
     if args.work is None:
@@ -702,7 +704,13 @@ def main() -> None:
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         ts = time.perf_counter()
         rec = recorded_seed(
-            seed, work, args.frames, args.distance, args.sim_param, args.model_option
+            seed,
+            work,
+            args.frames,
+            args.distance,
+            args.sim_param,
+            args.model_option,
+            rate_given=args.rate == "given",
         )
         r = run_variants(rec)
         runs.append(r)

@@ -40,6 +40,9 @@ def test_missing_observations_are_predicted_through(filt: str) -> None:
     assert np.all(np.abs(err[gap]) < 3 * sig_all[gap])
     assert np.degrees(np.abs(err[gap])).max() < 1.5
     assert np.degrees(np.abs(err[40:])).max() < 1.5
+    # the consistency samples: NIS at the updates, NEES at every step after the first
+    assert res.updated.sum() == 50 - 1 - len(gap) and not res.updated[gap].any()
+    assert res.estimated.sum() == 49 and not res.estimated[0] and res.estimated[gap].all()
 
 
 def test_nan_observation_is_flagged_and_equals_prediction() -> None:

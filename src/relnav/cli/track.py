@@ -222,7 +222,7 @@ def track(
         "settings": result.settings,
         "meta": result.meta,
         "frames": len(result),
-        "updates": sum(s == "update" for s in result.status),
+        "updates": int(result.updated.sum()),
         "flagged": result.n_flagged,
         "summary_after_20pct": summary,
         "consistency": result.consistency(),

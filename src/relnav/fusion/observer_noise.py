@@ -212,14 +212,13 @@ def consistency_of(results: Sequence[Any]) -> dict[str, Any]:
     """
     nis, nees, blocks, ll = [], [], [], 0.0
     for r in results:
-        upd = np.array([s == "update" for s in r.status])
+        upd = r.updated
         nis.append(np.asarray(r.nis, dtype=np.float64)[upd])
         if r.log_likelihood is not None:
             ll += float(np.nansum(np.asarray(r.log_likelihood, dtype=np.float64)[upd]))
         if r.truth is not None:
-            est = np.array([s not in ("init", "waiting") for s in r.status])
-            nees.append(r.nees()[est])
-            blocks.append(r.nees_blocks()[est])
+            nees.append(r.nees()[r.estimated])
+            blocks.append(r.nees_blocks()[r.estimated])
     n = np.concatenate(nis) if nis else np.zeros(0)
     e = np.concatenate(nees) if nees else np.zeros(0)
     b = np.concatenate(blocks) if blocks else np.zeros((0, 4))

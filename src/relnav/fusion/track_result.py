@@ -172,6 +172,17 @@ class TrackResult:
         }
 
     @property
+    def updated(self) -> np.ndarray:
+        """``(K,)`` bool: the steps with an accepted update (the NIS samples)."""
+        return np.array([s == "update" for s in self.status], dtype=bool)
+
+    @property
+    def estimated(self) -> np.ndarray:
+        """``(K,)`` bool: the steps with an estimate after the initializing one (the NEES
+        samples)."""
+        return np.array([s not in ("init", "waiting") for s in self.status], dtype=bool)
+
+    @property
     def n_flagged(self) -> int:
         """Steps whose observation was rejected (``flagged: ...``)."""
         return sum(s.startswith("flagged") for s in self.status)
@@ -256,12 +267,12 @@ class TrackResult:
             band = [float(chi2.ppf(a, dof * n) / n), float(chi2.ppf(1.0 - a, dof * n) / n)]
             return {"mean": float(x.mean()), "n": n, "dof": dof, "band": band}
 
-        upd = np.array([st == "update" for st in self.status])
-        out: dict[str, Any] = {"nis": block(np.where(upd, self.nis, np.nan), 6), "nees": None}
+        out: dict[str, Any] = {
+            "nis": block(np.where(self.updated, self.nis, np.nan), 6),
+            "nees": None,
+        }
         if self.truth is not None:
-            ne = self.nees()
-            est = np.array([st not in ("init", "waiting") for st in self.status])
-            out["nees"] = block(np.where(est, ne, np.nan), 12)
+            out["nees"] = block(np.where(self.estimated, self.nees(), np.nan), 12)
         return out
 
     def summary(self, skip: int | float = 0.2) -> dict[str, dict[str, list[float]]]:
