@@ -15,7 +15,8 @@ Paper 2's initial rate, ``relnav track`` without ``--omega0``, or both).
 
 The contour model's registration starts from the filter's prediction, so the observations
 depend on the noise model the filter ran with: ``--recording cal`` (default) uses those recorded
-by the main variant with the current ``CONTOUR_LI_ROTATING`` (tag ``cal-<hash>``), ``src`` those
+by the main variant with the loop's current model (``CONTOUR_LI_ROTATING`` with the rate given,
+``CONTOUR_LI_ROTATING_RATE_UNKNOWN`` without; tag ``cal-<hash>``), ``src`` those
 recorded by the former main variant (jackknife covariance; ``obsNNN_16f_3m_src.npz``). The
 calibration is a fixed point: calibrate, record with the new model, calibrate again.
 """
@@ -49,7 +50,7 @@ def runs_of(seeds: range, work: Path, recording: str, rate: str = "given") -> li
     """Calibration runs (observations without covariance, truth by the experiment's alignment)
     of the recording loop with the rate ``given`` or ``unknown`` (then tracked as that loop:
     ``omega0=None, init="rate"``)."""
-    tag = "src" if recording == "src" else pe.RECORDING
+    tag = "src" if recording == "src" else None  # None: the loop's calibrated model
     options = None if rate == "given" else {"omega0": None, "init": "rate"}
     out = []
     for seed in seeds:

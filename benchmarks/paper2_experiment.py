@@ -47,7 +47,9 @@ from scipy.stats import chi2
 from relnav.fusion.observer_noise import (
     CALIBRATION_FILTER_OPTIONS,
     CONTOUR_LI_ROTATING,
+    CONTOUR_LI_ROTATING_RATE_UNKNOWN,
     ObserverNoise,
+    calibrated_noise,
 )
 from relnav.fusion.tracker import (
     ContourObserver,
@@ -89,6 +91,7 @@ def _noise_text(noise: ObserverNoise) -> str:
 # cache tag of the recorded observations (``obs…_src.npz``: recorded by the former main variant,
 # which fed the contour model the predictions of a filter using the jackknife covariance)
 RECORDING = _recording_tag(CONTOUR_LI_ROTATING)
+RECORDING_RATE_UNKNOWN = _recording_tag(CONTOUR_LI_ROTATING_RATE_UNKNOWN)  # files `…-w0.npz`
 MAIN = "ukf+offset+bias+calibrated"
 # the contour observer's calibrated noise and the filter it was calibrated with
 CALIBRATED_OPTIONS: dict[str, Any] = {
@@ -261,12 +264,14 @@ def recorded_observations(
     noise: str = "reported",
     r_scale: float = 1.0,
     drift_scale: float = 1.0,
+    model: ObserverNoise = CONTOUR_LI_ROTATING,
 ) -> list[Observation | None]:
     """One seed's recorded observations for :meth:`Tracker.run` (``None`` where none).
 
     ``noise``: ``"reported"`` — each carries the observer's jackknife covariance × ``r_scale``
     and, as the drift of the observer bias, the previous observation's covariance ×
-    ``drift_scale``; ``"calibrated"`` — ``CONTOUR_LI_ROTATING``'s white error and drift;
+    ``drift_scale``; ``"calibrated"`` — ``model``'s white error and drift (the calibrated
+    model of the recording loop: ``CONTOUR_LI_ROTATING`` or ``…_RATE_UNKNOWN``);
     ``"fixed"`` — neither (the filter's own R). With recorded match sources (``W``) each carries
     its frame id and sources (for ``merge_slots``)."""
     if noise not in ("reported", "calibrated", "fixed"):
@@ -291,14 +296,17 @@ def recorded_observations(
         )
         prev_R = Rk
         obs.append(o)
-    return CONTOUR_LI_ROTATING.apply(obs) if noise == "calibrated" else obs
+    return model.apply(obs) if noise == "calibrated" else obs
 
 
-def run_variants(rec: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
-    """Every filter variant on one seed's recorded observations."""
+def run_variants(
+    rec: dict[str, np.ndarray], model: ObserverNoise = CONTOUR_LI_ROTATING
+) -> dict[str, dict[str, np.ndarray]]:
+    """Every filter variant on one seed's recorded observations (``model``: the calibrated
+    noise of the loop they were recorded in)."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for name, (filt, vopts, noise) in VARIANTS.items():
-        obs = recorded_observations(rec, noise)
+        obs = recorded_observations(rec, noise, model=model)
         res = Tracker(filt, **{"omega0": OMEGA0, **vopts}).run(rec["time"], obs)
         res.truth = _truth_for(res, rec["T_s_target"])
         out[name] = _pack(res)
@@ -314,16 +322,19 @@ def recorded_seed(
     model_option: list[str] | None = None,
     *,
     rate_given: bool = True,
-    recording: str = RECORDING,
+    recording: str | None = None,
 ) -> dict[str, np.ndarray]:
     """Seed ``seed``'s recorded observations, from ``work``'s cache or simulated and observed
     there (``sim_param``: scenario overrides ``KEY=VALUE``; ``model_option``: contour-model
     options ``KEY=VALUE``, YAML values; ``rate_given``: see :func:`observe_seed`, recordings
-    without the rate are tagged ``…-w0``; ``recording``: the cache tag, ``"src"`` for those
-    of the former main variant)."""
+    without the rate are tagged ``…-w0``; ``recording``: the cache tag, by default that of
+    the loop's calibrated noise (``RECORDING`` or ``RECORDING_RATE_UNKNOWN``), ``"src"`` for
+    those of the former main variant)."""
     import yaml
 
     sim_param, model_option = sim_param or [], model_option or []
+    if recording is None:
+        recording = RECORDING if rate_given else RECORDING_RATE_UNKNOWN
     tag = "_".join(p.replace("=", "-") for p in sorted(sim_param))
     mtag = "_".join(o.replace("=", "-") for o in sorted(model_option))
     cache = work / (
@@ -443,6 +454,10 @@ def aggregate(runs: list[dict[str, dict[str, np.ndarray]]], skip: int) -> dict[s
 
 def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict[str, Any]) -> None:
     m = agg[MAIN]
+    rate_given = meta.get("rate") != "unknown"
+    model = calibrated_noise(rate_given)
+    model_name = "CONTOUR_LI_ROTATING" + ("" if rate_given else "_RATE_UNKNOWN")
+    given, tag = ("given", RECORDING) if rate_given else ("unknown", RECORDING_RATE_UNKNOWN)
     lines = [
         "# Paper 2 simulation experiment — ours vs the paper",
         "",
@@ -463,12 +478,13 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         "for this run"
         + (f"; scenario overrides {meta['sim_param']}." if meta["sim_param"] else "."),
         "",
-        f"Main variant: `{MAIN}` — `relnav track`'s default with the rate given: contour-model "
-        "observations with the calibrated noise model (`CONTOUR_LI_ROTATING`: "
-        f"{_noise_text(CONTOUR_LI_ROTATING)}; `benchmarks/paper2_calibrate.py`, seeds 20–59), "
+        f"Main variant: `{MAIN}` — `relnav track`'s default with the rate {given}: "
+        f"contour-model observations with the calibrated noise model (`{model_name}`: "
+        f"{_noise_text(model)}; `benchmarks/paper2_calibrate.py`, seeds 20–59), "
         "centre-offset state, observer-drift bias state in the target's axes, Student-t update "
         "(8 dof). Observations recorded by this variant (the contour model's registration "
-        f"starts from its prediction; cache tag `{RECORDING}`); every variant runs on them.",
+        f"starts from its prediction; cache tag `{tag}`); every variant runs on them, with "
+        "that model where it is `calibrated`.",
         "",
         "| quantity | axis | paper (max) | ours: median of per-run max | 90th pct | worst run | "
         "runs within the paper's bound |",
@@ -712,7 +728,7 @@ def main() -> None:
             args.model_option,
             rate_given=args.rate == "given",
         )
-        r = run_variants(rec)
+        r = run_variants(rec, calibrated_noise(args.rate == "given"))
         runs.append(r)
         recs.append(rec)
         c = r[MAIN]

@@ -15,9 +15,11 @@ from relnav.errors import ConfigError, InputError
 from relnav.fusion.observer_noise import (
     CALIBRATION_FILTER_OPTIONS,
     CONTOUR_LI_ROTATING,
+    CONTOUR_LI_ROTATING_RATE_UNKNOWN,
     CalibrationRun,
     ObserverNoise,
     calibrate_observer_noise,
+    calibrated_noise,
     evaluate_observer_noise,
 )
 from relnav.fusion.observers import Observation, simulate_observations
@@ -158,6 +160,10 @@ def test_contour_observer_and_track_sequence_noise_options(tmp_path: Path) -> No
     from relnav.fusion.tracker import track_sequence
 
     assert ContourObserver().noise is CONTOUR_LI_ROTATING
+    # the calibrated model of the loop: with Paper 2's rate, or estimating it (init="rate")
+    assert calibrated_noise(True) is CONTOUR_LI_ROTATING
+    assert calibrated_noise(False) is CONTOUR_LI_ROTATING_RATE_UNKNOWN
+    assert CONTOUR_LI_ROTATING_RATE_UNKNOWN != CONTOUR_LI_ROTATING
     assert ContourObserver(noise="reported").noise == "reported"
     with pytest.raises(ConfigError):
         ContourObserver(noise="jackknife")  # type: ignore[arg-type]
@@ -184,6 +190,8 @@ def test_li_rotating_run_is_consistent_with_the_calibrated_noise(tmp_path: Path)
         res = track_sequence(tmp_path / "seq", observer_noise=noise, seed=1)
         assert res.n_flagged == 0 and res.meta["observer"] == "contour"
         assert res.settings["robust_dof"] == (8.0 if noise == "calibrated" else None)
+        if noise == "calibrated":  # no omega0: the model calibrated without the rate
+            assert res.meta["observer_noise"] == CONTOUR_LI_ROTATING_RATE_UNKNOWN.to_dict()
         out[noise] = res.consistency()
     for key in ("nis", "nees"):
         c = out["calibrated"][key]

@@ -44,7 +44,11 @@ import numpy as np
 from relnav.errors import ConfigError, InputError, RelnavError
 from relnav.fusion.dynamics import mean_motion
 from relnav.fusion.ekf import QuaternionEKF
-from relnav.fusion.observer_noise import CALIBRATION_FILTER_OPTIONS, ObserverNoise
+from relnav.fusion.observer_noise import (
+    CALIBRATION_FILTER_OPTIONS,
+    ObserverNoise,
+    calibrated_noise,
+)
 from relnav.fusion.observers import (
     ContourObserver,
     Observation,
@@ -442,13 +446,16 @@ def _rate_between(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
 
 
 def _observer_noise(
-    value: ObserverNoise | Literal["reported"] | str | Path | None,
-) -> ObserverNoise | Literal["reported"] | None:
-    """``track_sequence``'s ``observer_noise`` as the contour observer takes it."""
-    if value is None or isinstance(value, ObserverNoise):
+    value: ObserverNoise | Literal["reported"] | str | Path | None, rate_known: bool
+) -> ObserverNoise | Literal["reported"]:
+    """``track_sequence``'s ``observer_noise`` as the contour observer takes it (``None`` and
+    ``"calibrated"``: :func:`relnav.fusion.observer_noise.calibrated_noise` of the loop)."""
+    if value is None or (isinstance(value, str) and value == "calibrated"):
+        return calibrated_noise(rate_known)
+    if isinstance(value, ObserverNoise):
         return value
-    if isinstance(value, str) and value in ("calibrated", "reported"):
-        return None if value == "calibrated" else "reported"
+    if isinstance(value, str) and value == "reported":
+        return "reported"
     if isinstance(value, str | Path):
         return ObserverNoise.load(value)
     raise ConfigError(
@@ -579,7 +586,8 @@ def track_sequence(
         ``progress(done, total)``.
     observer_noise : ObserverNoise, "calibrated", "reported" or path, optional
         The contour observer's noise (:class:`ContourObserver` ``noise``): ``None`` or
-        ``"calibrated"`` = :data:`relnav.fusion.observer_noise.CONTOUR_LI_ROTATING`, a path =
+        ``"calibrated"`` = :func:`relnav.fusion.observer_noise.calibrated_noise` (the model
+        calibrated with ``omega0`` given, or the one without when it is not), a path =
         a JSON model (:meth:`ObserverNoise.save`). Only with the contour observer built here.
     **tracker_options
         Passed to :class:`Tracker` (``n_mean_motion``, ``orbit_radius_m``, ``q``, ``r`` …).
@@ -607,7 +615,7 @@ def track_sequence(
     if observer_noise is not None and observer is not None and observer != "contour":
         if not isinstance(observer, ContourObserver):
             raise ConfigError("observer_noise is an option of the contour observer")
-    noise = _observer_noise(observer_noise)
+    noise = _observer_noise(observer_noise, tracker_options.get("omega0") is not None)
     folder = Path(seq_dir)
     cam = ScanSequence(folder)
     if len(cam) == 0:
