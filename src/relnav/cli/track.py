@@ -170,7 +170,8 @@ def track(
     observer_noise: str = typer.Option(
         None,
         "--observer-noise",
-        help="Contour observer's noise: calibrated (default; Paper 2's simulation) | reported "
+        help="Contour observer's noise: calibrated (default; Paper 2's simulation, one model "
+        "with --omega0 and one without) | reported "
         "(its jackknife covariance) | FILE.json (relnav.fusion.observer_noise.ObserverNoise).",
     ),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="Write the PNG figures."),
