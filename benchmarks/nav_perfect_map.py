@@ -14,9 +14,9 @@ perfect):
 * ``previous``: the previous frame's true pose (no motion) — how much of the step it recovers.
 
 Printed per start: the median and maximum pose error after the registration (m, degrees), and
-the median 1σ of the answer's translation from the solver's information
-(``(H / σ̂² + Λ)⁻¹``, largest translation axis) with the ratio of the median error to it (≈ 1
-for an honest covariance). The ground truth builds the map and scores; this is a diagnostic of
+the median 1σ of the sensor's position in the answer from the solver's information
+(``(H / σ̂² + Λ)⁻¹`` with the lever arm, largest axis) with the ratio of the median error to it
+(≈ 1 for an honest covariance). The ground truth builds the map and scores; this is a diagnostic of
 the registration, not a navigation result.
 """
 
@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from nav_suite import simulate_suite
 from relnav.geometry import invert, rotation_angle
+from relnav.geometry.rotations import hat
 from relnav.io.sequences import ScanSequence
 from relnav.navigation.gicp import left_information
 from relnav.navigation.navigator import Navigator, _rms_radius
@@ -76,8 +77,11 @@ def probe(seq_dir: Path, frames: int, n_probe: int) -> dict[str, np.ndarray]:
             fit = nav._solve(P, T0, Lam, 3.0 * PRIOR_T, rng, radius)
             E = invert(gt[j]) @ fit["T"]
             out[start].append((np.linalg.norm(E[:3, 3]), math.degrees(rotation_angle(E[:3, :3]))))
+            # covariance of the sensor's position: a left twist [ρ, φ] of T_target_sensor moves
+            # it by ρ + φ × t (target frame)
             C = np.linalg.inv(fit["H"] / fit["var_factor"] + Lam)
-            out[f"sigma_{start}"].append(math.sqrt(float(np.linalg.eigvalsh(C[:3, :3])[-1])))
+            J = np.hstack([np.eye(3), -hat(fit["T"][:3, 3])])
+            out[f"sigma_{start}"].append(math.sqrt(float(np.linalg.eigvalsh(J @ C @ J.T)[-1])))
         steps.append(float(np.linalg.norm((invert(gt[j - 1]) @ gt[j])[:3, 3])))
         nav.map.insert(P @ gt[j][:3, :3].T + gt[j][:3, 3], j)
     return {k: np.asarray(v) for k, v in out.items()} | {"step": np.asarray(steps)}
