@@ -470,7 +470,13 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
     rate_given = meta.get("rate") != "unknown"
     model = calibrated_noise(rate_given)
     model_name = "CONTOUR_LI_ROTATING" + ("" if rate_given else "_RATE_UNKNOWN")
-    given, tag = ("given", RECORDING) if rate_given else ("unknown", RECORDING_RATE_UNKNOWN)
+    tag = RECORDING if rate_given else RECORDING_RATE_UNKNOWN
+    role = (
+        "`relnav track`'s default with the rate given"
+        if rate_given
+        else "`relnav track`'s filter and noise model, given ω₀ (the row `main, ω₀ unknown` is "
+        "`relnav track`'s default itself, which estimates it)"
+    )
     lines = [
         "# Paper 2 simulation experiment — ours vs the paper",
         "",
@@ -491,7 +497,7 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         "for this run"
         + (f"; scenario overrides {meta['sim_param']}." if meta["sim_param"] else "."),
         "",
-        f"Main variant: `{MAIN}` — `relnav track`'s default with the rate {given}: "
+        f"Main variant: `{MAIN}` — {role}: "
         f"contour-model observations with the calibrated noise model (`{model_name}`: "
         f"{_noise_text(model)}; `benchmarks/paper2_calibrate.py`, seeds 20–59), "
         "centre-offset state, observer-drift bias state in the target's axes, Student-t update "
