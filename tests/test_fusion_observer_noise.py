@@ -164,6 +164,16 @@ def test_contour_observer_and_track_sequence_noise_options(tmp_path: Path) -> No
     assert calibrated_noise(True) is CONTOUR_LI_ROTATING
     assert calibrated_noise(False) is CONTOUR_LI_ROTATING_RATE_UNKNOWN
     assert CONTOUR_LI_ROTATING_RATE_UNKNOWN != CONTOUR_LI_ROTATING
+    # track_sequence's observer_noise: None / "calibrated" follow the loop, the rest as given
+    from relnav.fusion.tracker import _observer_noise
+
+    for value in (None, "calibrated"):
+        assert _observer_noise(value, rate_known=True) is CONTOUR_LI_ROTATING
+        assert _observer_noise(value, rate_known=False) is CONTOUR_LI_ROTATING_RATE_UNKNOWN
+    assert _observer_noise("reported", rate_known=False) == "reported"
+    own = ObserverNoise(1e-3, 1e-3)
+    assert _observer_noise(own, rate_known=False) is own
+    assert _observer_noise(own.save(tmp_path / "own.json"), rate_known=True) == own
     assert ContourObserver(noise="reported").noise == "reported"
     with pytest.raises(ConfigError):
         ContourObserver(noise="jackknife")  # type: ignore[arg-type]
