@@ -41,11 +41,6 @@ from relnav.fusion.observer_noise import (
 )
 
 
-def _span(text: str) -> range:
-    a, _, b = text.partition(":")
-    return range(int(a), int(b))
-
-
 def runs_of(seeds: range, work: Path, recording: str, rate: str = "given") -> list[CalibrationRun]:
     """Calibration runs (observations without covariance, truth by the experiment's alignment)
     of the recording loop with the rate ``given`` or ``unknown`` (then tracked as that loop:
@@ -70,8 +65,10 @@ def runs_of(seeds: range, work: Path, recording: str, rate: str = "given") -> li
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, required=True)
-    ap.add_argument("--seeds", type=_span, default=_span("20:60"), help="calibration seeds a:b")
-    ap.add_argument("--check", type=_span, default=_span("0:20"), help="held-out seeds a:b")
+    ap.add_argument(
+        "--seeds", type=pe.seed_span, default=range(20, 60), help="calibration seeds a:b"
+    )
+    ap.add_argument("--check", type=pe.seed_span, default=range(0, 20), help="held-out seeds a:b")
     ap.add_argument("--fit", choices=("consistency", "likelihood"), default="consistency")
     ap.add_argument("--per-axis", action="store_true", help="12 values instead of 4")
     ap.add_argument("--recording", choices=("src", "cal"), default="cal")

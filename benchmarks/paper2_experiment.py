@@ -48,7 +48,6 @@ from scipy.stats import t as student_t
 from relnav.fusion.observer_noise import (
     CALIBRATION_FILTER_OPTIONS,
     CONTOUR_LI_ROTATING,
-    CONTOUR_LI_ROTATING_RATE_UNKNOWN,
     ObserverNoise,
     calibrated_noise,
 )
@@ -89,10 +88,12 @@ def _noise_text(noise: ObserverNoise) -> str:
     )
 
 
-# cache tag of the recorded observations (``obs…_src.npz``: recorded by the former main variant,
-# which fed the contour model the predictions of a filter using the jackknife covariance)
-RECORDING = _recording_tag(CONTOUR_LI_ROTATING)
-RECORDING_RATE_UNKNOWN = _recording_tag(CONTOUR_LI_ROTATING_RATE_UNKNOWN)  # files `…-w0.npz`
+def seed_span(text: str) -> range:
+    """Seeds ``a:b`` (``b`` excluded) of a command line."""
+    a, _, b = text.partition(":")
+    return range(int(a), int(b))
+
+
 MAIN = "ukf+offset+bias+calibrated"
 # the contour observer's calibrated noise and the filter it was calibrated with
 CALIBRATED_OPTIONS: dict[str, Any] = {
@@ -102,8 +103,8 @@ CALIBRATED_OPTIONS: dict[str, Any] = {
 }
 VARIANTS: dict[str, tuple[str, dict[str, Any], str]] = {
     # name: (filter, tracker options, the observations' noise: "fixed" = the filter's R,
-    # "reported" = the observer's jackknife covariance and drift, "calibrated" =
-    # relnav.fusion.observer_noise.CONTOUR_LI_ROTATING)
+    # "reported" = the observer's jackknife covariance and drift, "calibrated" = the recording
+    # loop's relnav.fusion.observer_noise.calibrated_noise)
     "ukf (fixed R 1 cm / 1°)": ("ukf", {}, "fixed"),
     "ukf+jackknife": ("ukf", {}, "reported"),
     "ukf+offset (fixed R 1 cm / 1°)": ("ukf", {"centre_offset": True}, "fixed"),
@@ -226,7 +227,7 @@ def observe_seed(
     ``W (K, K)``: ``W[k, j]`` = share of observation ``k``'s model matches contributed by the
     frame merged at step ``j``; row ``k`` all NaN when observation ``k`` carries no sources,
     all zero for the anchor frame. ``R`` is the contour model's own (jackknife) covariance; the
-    main variant's run itself used the calibrated noise (``CONTOUR_LI_ROTATING``).
+    main variant's run itself used the loop's calibrated noise (``calibrated_noise``).
     """
     fname, opts, _ = VARIANTS[MAIN]
     rec = _Recorder(ContourObserver(lidar="lidar", seed=seed, model_options=model_options))
@@ -329,13 +330,13 @@ def recorded_seed(
     there (``sim_param``: scenario overrides ``KEY=VALUE``; ``model_option``: contour-model
     options ``KEY=VALUE``, YAML values; ``rate_given``: see :func:`observe_seed`, recordings
     without the rate are tagged ``…-w0``; ``recording``: the cache tag, by default that of
-    the loop's calibrated noise (``RECORDING`` or ``RECORDING_RATE_UNKNOWN``), ``"src"`` for
-    those of the former main variant)."""
+    the loop's calibrated noise (:func:`_recording_tag`), ``"src"`` for those of the former
+    main variant, whose filter used the jackknife covariance)."""
     import yaml
 
     sim_param, model_option = sim_param or [], model_option or []
     if recording is None:
-        recording = RECORDING if rate_given else RECORDING_RATE_UNKNOWN
+        recording = _recording_tag(calibrated_noise(rate_given))
     tag = "_".join(p.replace("=", "-") for p in sorted(sim_param))
     mtag = "_".join(o.replace("=", "-") for o in sorted(model_option))
     cache = work / (
@@ -470,7 +471,6 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
     rate_given = meta.get("rate") != "unknown"
     model = calibrated_noise(rate_given)
     model_name = "CONTOUR_LI_ROTATING" + ("" if rate_given else "_RATE_UNKNOWN")
-    tag = RECORDING if rate_given else RECORDING_RATE_UNKNOWN
     role = (
         "`relnav track`'s default with the rate given"
         if rate_given
@@ -481,14 +481,14 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         "# Paper 2 simulation experiment — ours vs the paper",
         "",
         f"`python benchmarks/paper2_experiment.py --out {meta['out']} --seeds {meta['seeds']}"
-        + (" --rate unknown" if meta.get("rate") == "unknown" else "")
+        + ("" if rate_given else " --rate unknown")
         + f"` — li-rotating at {meta['distance']} m, {meta['frames']} frames at 4.5 s (5°/s "
         f"about z, 0.22 Hz), seeds {meta['first_seed']}–{meta['first_seed'] + meta['seeds'] - 1}"
         + (
             ", recorded by the run of `relnav track` without `--omega0` (rate from the first "
             "two observations; the variants are run on its observations, with ω₀ = (0, 0, 5)°/s "
             "unless named)"
-            if meta.get("rate") == "unknown"
+            if not rate_given
             else ", ω₀ = (0, 0, 5)°/s"
         )
         + "; errors after the first "
@@ -502,7 +502,8 @@ def write_table(agg: dict[str, Any], path: Path, meta: dict[str, Any], obs: dict
         f"{_noise_text(model)}; `benchmarks/paper2_calibrate.py`, seeds 20–59), "
         "centre-offset state, observer-drift bias state in the target's axes, Student-t update "
         "(8 dof). Observations recorded by this variant (the contour model's registration "
-        f"starts from its prediction; cache tag `{tag}`); every variant runs on them, with "
+        f"starts from its prediction; cache tag `{_recording_tag(model)}`); every variant runs "
+        "on them, with "
         "that model where it is `calibrated`.",
         "",
         "| quantity | axis | paper (max) | ours: median of per-run max | 90th pct | worst run | "

@@ -187,16 +187,11 @@ def oracle(recs: list[dict[str, np.ndarray]], cal: list[dict[str, np.ndarray]]) 
         )
 
 
-def _range(s: str) -> range:
-    a, b = s.split(":")
-    return range(int(a), int(b))
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, required=True)
-    ap.add_argument("--seeds", type=_range, default=range(0, 20), help="A:B (B excluded)")
-    ap.add_argument("--calibrate", type=_range, default=None, help="A:B: oracle run")
+    ap.add_argument("--seeds", type=pe.seed_span, default=range(0, 20), help="A:B (B excluded)")
+    ap.add_argument("--calibrate", type=pe.seed_span, default=None, help="A:B: oracle run")
     args = ap.parse_args()
     recs = [load(args.work, s) for s in args.seeds]
     split(recs)

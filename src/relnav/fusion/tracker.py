@@ -58,7 +58,7 @@ from relnav.fusion.observers import (
     simulate_observations,
 )
 from relnav.fusion.pose_filter import PAPER2_RATE_HZ, PoseFilter
-from relnav.fusion.track_result import TrackResult, TrackTruth
+from relnav.fusion.track_result import TrackResult, TrackTruth, _body_rates
 from relnav.fusion.ukf import TwistorUKF
 from relnav.geometry.rotations import project_to_so3, quat_to_matrix
 from relnav.geometry.se3 import invert
@@ -352,7 +352,7 @@ class Tracker:
                 o0.position,
                 o0.quat_xyzw,
                 velocity=self.velocity0,
-                omega=_rate_between(o0.quat_xyzw, obs.quat_xyzw, t - t0),
+                omega=_body_rates(np.array([t0, t]), np.stack([o0.quat_xyzw, obs.quat_xyzw]))[0],
             )
             self._t, self._first = t0, None
         if not math.isfinite(t) or (self._t is not None and t < self._t):
@@ -434,15 +434,6 @@ class Tracker:
                 progress(k + 1, K)
         assert self.filter is not None
         return rec.result(t, self.filter_name, self.filter.settings(), truth, dict(meta or {}))
-
-
-def _rate_between(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
-    """Body rate (rad/s) turning attitude ``q0`` into ``q1`` (xyzw, ``R_sensor_body``) in
-    ``dt`` s: ``log(q₀⁻¹ q₁)/dt``, the shortest rotation."""
-    from scipy.spatial.transform import Rotation
-
-    r = Rotation.from_quat(q0).inv() * Rotation.from_quat(q1)
-    return r.as_rotvec() / float(dt)
 
 
 def _observer_noise(

@@ -470,8 +470,7 @@ def fit_noise_scales(
     lo, hi = np.log(float(bounds[0])), np.log(float(bounds[1]))
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
         raise ConfigError(f"bounds must be 0 < low < high, got {bounds!r}")
-    if {"run", "steps", "gt_poses"} & set(options):
-        raise ConfigError("run, steps and gt_poses are not options of the relative state")
+    check_state_options(options)
     cache: dict[tuple[float, ...], float] = {}
 
     def total(x: np.ndarray) -> float:
