@@ -111,7 +111,11 @@ def sequence_figures(folder: Path, options: dict[str, str]) -> dict[str, Any]:
         undetermined.append(bool(prof.min() < CHI2_1_95))
         best = int(np.argmin(prof))
         pull.append(OFFSETS[best] if prof[best] < 0 else 0.0)
-    return {"wrong": np.array(wrong), "undetermined": np.array(undetermined), "pull": np.array(pull)}
+    return {
+        "wrong": np.array(wrong),
+        "undetermined": np.array(undetermined),
+        "pull": np.array(pull),
+    }
 
 
 def _mean(x: np.ndarray) -> str:
