@@ -6,7 +6,8 @@ each early step is registered onto a map of only a few sparse scans, under a mot
 velocity is not known yet, and such a step is weak in the target's aspect (a rotation about the
 target against a lateral translation). Once ``init_window`` frames are tracked, their poses
 (the first one fixed: the anchor) are refined from all of them at once, the map is rebuilt from
-the refined poses and the motion filter restarts from the refined last steps
+the refined poses and the motion filter goes on from the refined last pose, with its own
+velocity (``init_velocity="keep"``) or the refined last steps' (``"refined"``)
 (:func:`refine_window`). Two solvers:
 
 * ``joint`` (default): Levenberg–Marquardt over all the window's poses; every map point paired
@@ -17,22 +18,38 @@ the refined poses and the motion filter restarts from the refined last steps
 * ``loo``: each frame in turn registered onto the voxel map of the others (leave-one-out,
   Gauss–Seidel sweeps) with the navigator's own solver.
 
-**[measured]** (``benchmarks/nav_suite.py --out OUT --methods relnav -O init_window=10``) The
-APE falls on 9 of the 17 suite sequences (eros-ellipse-64 0.59 → 0.44 m, voyager-ellipse-128
-2.07 → 1.26, asteroid-helical-128 0.81 → 0.15, sim-bennu-resample 9.99 → 1.19, sim-helical
-0.085 → 0.022), the check refuses the refinement on 5 (envisat-tumble-64, iridium-helical-64,
-sim-voyager, sim-orion, sim-bennu: unchanged) and it is worse on 3 (aura-ellipse-64 0.40 →
-0.64, orion-inclined-64 8.09 → 9.97 with 14 → 26 wrong steps, sim-eoi-resample 0.068 → 0.073).
-The outcome still changes with the window on the sparse sequences (K = 8 / 10 / 15: orion
-7.6 / 10.0 / 8.5 m, aura 0.52 / 0.64 / 0.80, sim-eoi 0.02 / 0.02 / 2.6). Without the check,
-envisat 0.81 → 1.22 m (median over 20 noise seeds 1.44 → 3.08 m, worse on 17; with the check
-all 20 are refused) and iridium 11 → 41 wrong steps. Started at the true poses, the joint
-refinement of envisat's first 10 frames (41–50 points of a box) drifts 0.27° per frame away
-from them: those scans favour a smaller rotation rate, which constant-velocity terms cannot
-see. The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
-Cost: one refinement of 0.3–0.7 s on the 64×64 sequences, 0.5–1.7 s at 128×128, 3.9 s on
-sim-eoi (1 500 points per scan, the former point budget), all of it in the window's last frame
-(2–12 ms per frame over the suite's 150–250-frame sequences, 20–65 ms over the 60-frame presets).
+**[measured]** The default is ``init_window=10`` with ``init_velocity="keep"`` (the filter
+keeps its own velocity; the window's poses and the map are replaced). Off → on,
+``python benchmarks/nav_suite.py --out OUT --methods relnav [-O init_window=0]`` (APE m, wrong
+steps): eros-ellipse-64 0.59 → 0.42, voyager-ellipse-128 2.07 → 1.21, asteroid-helical-128 0.81
+→ 0.16, sim-helical-resample 0.343 → 0.254, sim-voyager-resample 0.111 → 0.091,
+sim-bennu-resample 9.99 / 6 → 1.32 / 0, orion-inclined-64 8.09 / 14 → 8.03 / 7,
+sim-orion-resample 31.9 / 33 → 31.1 / 32; worse on aura-ellipse-64 0.40 → 0.57; refused by the
+check and unchanged on the other 8 (envisat-tumble-64, iridium-helical-64 and the dense presets).
+Held out (never used to choose): comet-ellipse-64 0.47 → 0.13, capsule-ellipse-128 52.4 → 51.9,
+voyager-helical-64 and aura-tumble-64 refused. Under 6 neutral perturbations of the solver
+(``benchmarks/nav_weak_directions.py --perturb 6``) the medians go eros 0.58 → 0.46,
+voyager-ellipse-128 2.08 → 1.19, asteroid-helical-128 0.81 → 0.18, aura-ellipse-64 0.44 → 0.57;
+under 12, orion-inclined-64 7.35 m / 11 wrong → 7.11 / 13 (chaotic either way) and
+iridium-helical-64 17.5 → 17.2 m. Over windows of 6, 8, 10, 12 and 15 frames nothing is lost
+(sim-bennu-resample 2.06 / 7.18 / 1.32 / 2.03 / 0.99 m, sim-helical-resample 0.25–0.30 m,
+asteroid-helical-128 0.13–0.54 m; with 12 frames iridium-helical-64 8.1 m but 30 wrong steps).
+With ``init_velocity="refined"`` (the filter restarting from the mean of the refined last
+steps, the former setting) the dense presets break for some windows: 8 frames lose sim-orion
+(0.08 → 73.7 m: the restarted velocity is 40 χ² off the filter's, the next step is
+inconsistent with it, the re-registration under the weak prior is accepted and the widened
+filter lets the capsule slide 11.5 m), 12 frames sim-eoi (0.008 → 2.3 m, velocity 302 χ² off);
+the refinement's own pose corrections are 20–5 000 χ² of the filter's covariance on the runs it
+helps too, so no consistency gate tells the cases apart. Without the check, envisat-tumble-64
+is worse on 17 of 20 noise seeds (median APE 1.44 → 3.08 m): started at the true poses the
+refinement drifts 0.27° per frame away from them (its 50-point scans of a box themselves favour
+a slower rotation, which constant-velocity terms cannot see); with the check all 20 are refused.
+The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
+Cost: one refinement (or refused attempt) of 0.3–1.7 s at 64×64 and 128×128 and 3.6 s on
+sim-eoi's 4 000-point scans, all in the window's last frame: the median time per frame is
+unchanged, the mean over a run rises from 1.4–3.0 to 2.4–6.5 ms on the flash sequences (9.9 →
+19.6 ms on asteroid-helical-128) and from 2.3–4.1 to 9–24 ms on the 60-frame presets (28 →
+88 ms on sim-eoi).
 """
 
 from __future__ import annotations
@@ -78,7 +95,8 @@ def check_window_options(c: NavigatorConfig) -> None:
         )
     if c.init_window and c.bootstrap_frames:
         raise ConfigError(
-            "method 'relnav': options init_window and bootstrap_frames exclude each other"
+            "method 'relnav': options init_window and bootstrap_frames exclude each other "
+            "(set init_window=0 to use bootstrap_frames)"
         )
 
 
@@ -116,7 +134,10 @@ def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometrySte
     refinement when the window is full; its time is added to this frame's."""
     if nav._win is None or nav.map is None:
         return
-    ok = P is not None and out.status in MERGED_STATUSES
+    # in the map: the first frame and every step merged into it (an integrity label such as
+    # ``degenerate`` over the alert limit does not take a merged scan out of the map)
+    merged = out.result is not None and bool(out.result.info.get("merged"))
+    ok = P is not None and (out.status in MERGED_STATUSES or merged)
     f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
     if ok:
         assert P is not None
@@ -402,8 +423,9 @@ def refine_window(nav: Navigator) -> None:
     voxel (rotation times the scan's range) or ``init_rounds``. A registration with too
     few pairs or too little overlap keeps its pose. Frames not in the map follow the
     correction of the last accepted frame before them. Then the map is rebuilt from the
-    refined poses, the filter's pose is the refined one and its velocity the mean of the
-    refined last steps (half of the window's steps, at least two), and the smoother
+    refined poses, the filter's pose is the refined one and its velocity its own
+    (``init_velocity="keep"``) or the mean of the refined last steps (``"refined"``: half of the
+    window's steps, at least two), and the smoother
     restarts at the last frame: :meth:`Navigator.finalize` returns the refined poses for the window.
     """
     c = nav.config

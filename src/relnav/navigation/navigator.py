@@ -291,6 +291,7 @@ class Navigator:
             ts = time.perf_counter()
             Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+            result.info["merged"] = True  # in the map, whatever label the integrity check adds
             self.repeats.remember(self.full_scan, self.pose, self.n_frames)
             self._update_symmetry()
             timings["map"] = time.perf_counter() - ts

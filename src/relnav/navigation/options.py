@@ -69,21 +69,23 @@ class NavigatorConfig:
         (the model, not the scan, was wrong: a manoeuvre or an over-confident velocity).
     bootstrap_frames : int
         After this many frames, track them again from the velocity they revealed (once; 0 =
-        off, the default): the first step has no motion prior (see
+        off, the default; needs ``init_window=0``): the first step has no motion prior (see
         :meth:`Navigator._bootstrap`). Measured on the suite with 5: better on sim-bennu,
         sim-eoi and orion-inclined-64's wrong steps, worse on iridium-helical-64, so off.
     init_window : int
-        Multi-view refinement of the first frames (0 = off, the default; else at least 3): once
+        Multi-view refinement of the first frames (default 10; 0 = off; else at least 3): once
         this many frames are tracked their poses are refined together, the first one fixed,
-        then the map is rebuilt and the filter restarts (:mod:`relnav.navigation.multiview`
-        has the method and the suite's measurements: better on 9 of 17 sequences, worse on 3).
+        then the map is rebuilt and the filter goes on from the refined last pose
+        (:mod:`relnav.navigation.multiview` has the method and the suite's measurements).
     init_rounds, init_gate, init_solver, init_prior, init_prior_scale, init_inplane_sigma :
         Rounds at most; pair gate (× ``s₀``); ``joint`` or ``loo`` solver; ``motion``,
         ``velocity`` or ``weak`` prior and the factor on its 1σ; the joint refinement's
         in-plane 1σ (× ``s₀``) — see :func:`relnav.navigation.multiview.refine_window`.
     init_velocity, init_check, init_repeat :
-        The filter's velocity afterwards (``refined`` or ``keep``); keep a joint refinement only
-        if it is more certain of the last pose than the filter; refine once more over the first
+        The filter's velocity afterwards: its own (``keep``, the default) or the mean of the
+        refined last steps (``refined``: the suite's dense presets are lost for some windows,
+        see :mod:`relnav.navigation.multiview`); keep a joint refinement only if it is more
+        certain of the last pose than the filter; refine once more over the first
         ``init_repeat`` frames (0 = off; more than ``init_window``).
     smooth_lag : int
         Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
@@ -410,7 +412,7 @@ class NavigatorConfig:
     adaptive_noise: bool = True
     smooth_lag: int = 20
     bootstrap_frames: int = 0
-    init_window: int = 0
+    init_window: int = 10
     init_rounds: int = 10
     init_gate: float = 3.0
     init_repeat: int = 0
@@ -418,7 +420,7 @@ class NavigatorConfig:
     init_prior: Literal["weak", "motion", "velocity"] = "motion"
     init_prior_scale: float = 1.0
     init_inplane_sigma: float = 3.0
-    init_velocity: Literal["refined", "keep"] = "refined"
+    init_velocity: Literal["refined", "keep"] = "keep"
     init_check: bool = True
     min_degeneracy: float = 1e-6
     sigma_acc_t: float = 0.2
