@@ -22,6 +22,10 @@ the map (``flagged``: an ``ok`` step labelled by ``flag_probability``, see
 class NavigatorConfig:
     """Options of :class:`Navigator` (``-O key=value`` on the command line).
 
+    The **[measured]** figures below were taken with the defaults of their time: those made
+    before the multi-view start became the default (``init_window=10``, ``init_velocity="keep"``;
+    every one except ``init_window``'s own) are reproduced with ``-O init_window=0``.
+
     Attributes
     ----------
     voxel_factor : float
