@@ -31,9 +31,11 @@ voyager-helical-64 and aura-tumble-64 refused. Under 6 neutral perturbations of 
 (``benchmarks/nav_weak_directions.py --perturb 6``) the medians go eros 0.58 → 0.46,
 voyager-ellipse-128 2.08 → 1.19, asteroid-helical-128 0.81 → 0.18, aura-ellipse-64 0.44 → 0.57;
 under 12, orion-inclined-64 7.35 m / 11 wrong → 7.11 / 13 (chaotic either way) and
-iridium-helical-64 17.5 → 17.2 m. Over windows of 6, 8, 10, 12 and 15 frames nothing is lost
-(sim-bennu-resample 2.06 / 7.18 / 1.32 / 2.03 / 0.99 m, sim-helical-resample 0.25–0.30 m,
-asteroid-helical-128 0.13–0.54 m; with 12 frames iridium-helical-64 8.1 m but 30 wrong steps).
+iridium-helical-64 17.5 → 17.2 m. Over windows of 6, 8, 10, 12 and 15 frames no sequence is
+lost as with the former setting below (sim-bennu-resample 2.06 / 7.18 / 1.32 / 2.03 / 0.99 m,
+sim-helical-resample 0.25–0.30 m, asteroid-helical-128 0.13–0.54 m; orion-inclined-64 2.9 /
+13.3 / 8.0 / 6.8 / 9.6 m, chaotic as without; with 12 frames iridium-helical-64 8.1 m but 30
+wrong steps).
 With ``init_velocity="refined"`` (the filter restarting from the mean of the refined last
 steps, the former setting) the dense presets break for some windows: 8 frames lose sim-orion
 (0.08 → 73.7 m: the restarted velocity is 40 χ² off the filter's, the next step is
