@@ -125,7 +125,7 @@ def test_a_refused_refinement_leaves_the_tracked_trajectory(orbit_seq, baseline,
     changes: poses equal to the run without the option."""
     from relnav.navigation import multiview
 
-    monkeypatch.setattr(multiview, "_joint_is_surer", lambda nav, used, gate, sa: False)
+    monkeypatch.setattr(multiview, "_joint_is_surer", lambda *args: False)
     run = run_sequence(orbit_seq, "relnav", init_window=WINDOW, init_solver="joint")
     assert np.allclose(run.poses, baseline.poses, atol=1e-9)
 
@@ -137,3 +137,91 @@ def test_the_certainty_check_is_recorded(orbit_seq):
     (rec,) = nav.refinements
     assert isinstance(rec["accepted"], bool)
     assert rec["time_s"] > 0
+
+
+def test_joint_pair_system_is_the_gauss_newton_system_of_its_cost() -> None:
+    """The window's pair normal equations: ``H`` symmetric with the ``Jᵀ W J`` blocks of a
+    direct construction, and ``g`` half the finite-difference gradient of the robust cost in
+    the poses' left perturbations (the Gauss–Newton gradient of ``Σ ρ(d²)`` is ``2 Jᵀ W r``)."""
+    from relnav.geometry.lie import exp_se3
+    from relnav.navigation.multiview import _pair_system
+
+    rng = np.random.default_rng(3)
+    n, N = 3, 40
+    Y = rng.normal(size=(N, 3))
+    lab = np.repeat(np.arange(n), N // n + 1)[:N]
+    a = np.arange(N)
+    b = (a + 7) % N
+    b = np.where(lab[b] == lab[a], (b + 1) % N, b)
+    A = rng.normal(size=(N, 3, 3))
+    Om = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(3)
+    k2 = 0.8
+    H, g, cost = _pair_system(Y, a, b, lab, Om, k2, n)
+    assert np.allclose(H, H.T)
+
+    def skew(x: np.ndarray) -> np.ndarray:
+        return np.array([[0, -x[2], x[1]], [x[2], 0, -x[0]], [-x[1], x[0], 0]])
+
+    Href = np.zeros((6 * n, 6 * n))
+    for p, q in zip(a, b, strict=True):
+        r = Y[p] - Y[q]
+        d2 = r @ Om[q] @ r
+        W = (k2 / (k2 + d2)) ** 2 * Om[q]
+        Js = {p: np.hstack([np.eye(3), -skew(Y[p])]), q: -np.hstack([np.eye(3), -skew(Y[q])])}
+        for u in (p, q):
+            for v in (p, q):
+                iu, iv = 6 * lab[u], 6 * lab[v]
+                Href[iu : iu + 6, iv : iv + 6] += Js[u].T @ W @ Js[v]
+    assert np.allclose(H, Href)
+
+    def robust_cost(xi: np.ndarray) -> float:
+        Z = np.array(
+            [
+                (exp_se3(xi[6 * lab[m] : 6 * lab[m] + 6]) @ np.append(Y[m], 1.0))[:3]
+                for m in range(N)
+            ]
+        )
+        return _pair_system(Z, a, b, lab, Om, k2, n)[2]
+
+    eps = 1e-6
+    grad = np.array(
+        [(robust_cost(eps * e) - robust_cost(-eps * e)) / (2 * eps) for e in np.eye(6 * n)]
+    )
+    assert cost == pytest.approx(robust_cost(np.zeros(6 * n)))
+    np.testing.assert_allclose(g, 0.5 * grad, rtol=1e-5, atol=1e-7)
+
+
+def test_window_pairs_are_the_nearest_other_frame_point_within_the_gate() -> None:
+    """The two-pass pair search (plane neighbours first, a wider query for the rest) gives the
+    pairs of a direct search: the nearest point of another frame among the ``2n + 8``
+    nearest within the gate, including points whose 10 nearest are all of their own frame."""
+    from types import SimpleNamespace
+
+    from scipy.spatial import cKDTree
+
+    from relnav.navigation.multiview import WindowFrame, _window_pairs
+    from relnav.navigation.navigator import NavigatorConfig
+
+    rng = np.random.default_rng(5)
+    used = []
+    for i in range(4):
+        P = rng.normal(scale=1.0, size=(300, 3))
+        # a clump of 12 own-frame points: their 10 nearest are their own, the 16 are not
+        P[:12] = rng.normal(scale=0.01, size=(12, 3)) + np.array([3.0 + i, 0.0, 0.0])
+        f = WindowFrame(i, float(i), np.eye(4), True)
+        f.Pm = P
+        used.append(f)
+    nav = SimpleNamespace(config=NavigatorConfig(), spacing0=0.1)
+    gate = 1.2
+    Y, lab, _, a, b = _window_pairs(nav, used, gate)
+    kq = 2 * len(used) + 8
+    d, idx = cKDTree(Y).query(Y, k=kq, distance_upper_bound=gate)
+    want = {}
+    for p in range(len(Y)):
+        for dist, q in zip(d[p], idx[p], strict=True):
+            if np.isfinite(dist) and lab[q] != lab[p]:
+                want[p] = q
+                break
+    assert dict(zip(a.tolist(), b.tolist(), strict=True)) == want
+    clump = np.concatenate([np.arange(12) + 300 * i for i in range(4)])
+    assert set(clump.tolist()) <= set(want)  # paired by the second pass

@@ -60,15 +60,15 @@ import itertools
 import logging
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
+from numba import njit
 
 from relnav.errors import ConfigError
-from relnav.geometry.lie import exp_se3, log_se3
+from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
+from relnav.geometry.lie import _exp, _log, exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
 from relnav.navigation.options import MERGED_STATUSES
@@ -77,6 +77,10 @@ from relnav.navigation.voxel_map import even_subset, plane_information
 if TYPE_CHECKING:
     from relnav.navigation.navigator import Navigator, NavigatorConfig
     from relnav.odometry.odometry import OdometryStep
+
+PairMemo = dict[bytes, tuple[np.ndarray, ...]]
+"""The window's pairs at the last poses evaluated (:func:`_window_pairs`), by pose bytes: the
+graduated kernel changes the weights, not the pairs."""
 
 __all__ = ["WindowFrame", "check_window_options", "refine_window", "window_step"]
 
@@ -156,7 +160,9 @@ def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometrySte
         nav._win = None
 
 
-def _joint_refine(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray) -> int:
+def _joint_refine(
+    nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray, memo: PairMemo
+) -> int:
     """Levenberg–Marquardt over the poses of ``used`` but the first (the anchor), with the
     solver's graduated kernel (``kernel_start`` × ``kernel_decay`` per round down to
     ``kernel``); returns the rounds run.
@@ -171,13 +177,13 @@ def _joint_refine(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.n
     v = nav.map.voxel_size if nav.map is not None else 1.0
     lam, rounds = 1e-4, 0
     kern = max(float(c.kernel), float(c.kernel_start))
-    H, g, cost = _joint_system(nav, used, gate, kern, sa)
+    H, g, cost = _joint_system(nav, used, gate, kern, sa, memo)
     while rounds < c.init_rounds:
         k_r = max(float(c.kernel), float(c.kernel_start) * float(c.kernel_decay) ** rounds)
         rounds += 1
         if k_r != kern:
             kern = k_r
-            H, g, cost = _joint_system(nav, used, gate, kern, sa)
+            H, g, cost = _joint_system(nav, used, gate, kern, sa, memo)
         A = H[6:, 6:] + lam * np.diag(np.diag(H[6:, 6:]))
         try:
             delta = -np.linalg.solve(A, g[6:])
@@ -191,7 +197,7 @@ def _joint_refine(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.n
             dx = delta[6 * i : 6 * i + 6]
             f.pose = exp_se3(dx) @ f.pose
             moved = max(moved, float(np.linalg.norm(dx[:3]) + np.linalg.norm(dx[3:]) * f.rng))
-        H2, g2, cost2 = _joint_system(nav, used, gate, kern, sa)
+        H2, g2, cost2 = _joint_system(nav, used, gate, kern, sa, memo)
         if cost2 < cost:
             H, g, cost = H2, g2, cost2
             lam = max(lam / 3.0, 1e-7)
@@ -205,7 +211,9 @@ def _joint_refine(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.n
     return rounds
 
 
-def _joint_is_surer(nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray) -> bool:
+def _joint_is_surer(
+    nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray, memo: PairMemo
+) -> bool:
     """Is the joint refinement more certain of the window's last pose than the filter?
 
     **[interpretation, measured]** The joint problem's covariance of the last frame (the
@@ -217,7 +225,7 @@ def _joint_is_surer(nav: Navigator, used: list[WindowFrame], gate: float, sa: np
     (2.6 m against 1.9 m) and sim-orion, the first four being where the refinement made
     the APE worse.
     """
-    H, _, _ = _joint_system(nav, used, gate, float(nav.config.kernel), sa, regular=False)
+    H, _, _ = _joint_system(nav, used, gate, float(nav.config.kernel), sa, memo, regular=False)
     assert nav.motion is not None
     try:
         C = np.linalg.inv(H[6:, 6:])[-6:, -6:]
@@ -239,6 +247,7 @@ def _joint_system(
     gate: float,
     kern: float,
     sa: np.ndarray,
+    memo: PairMemo | None = None,
     regular: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Normal equations ``(H, g)`` (6n) and the cost of the window's joint problem at the
@@ -254,52 +263,20 @@ def _joint_system(
     :func:`_velocity_terms`). The first frame's weak prior on each pose keeps ``H``
     regular (not in the cost).
     """
-    c, s0 = nav.config, nav.spacing0
+    c = nav.config
+    key = b"".join(f.pose.tobytes() for f in used)
+    if memo is not None and key in memo:
+        Y, lab, Om, a, b = memo[key]
+    else:
+        Y, lab, Om, a, b = _window_pairs(nav, used, gate)
+        if memo is not None:
+            if len(memo) >= 2:  # the current poses and the last kept ones
+                del memo[next(iter(memo))]
+            memo[key] = (Y, lab, Om, a, b)
     n = len(used)
-    Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
-    lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
-    tree = cKDTree(Y)
-    k = min(c.k_neighbors, len(Y))
-    _, nb = tree.query(Y, k=k)
-    Om, _ = plane_information(
-        Y, np.asarray(nb).reshape(len(Y), k), c.init_inplane_sigma * s0, c.noise_floor * s0
-    )
-    kq = min(len(Y), 2 * n + 8)
-    d, idx = tree.query(Y, k=kq, distance_upper_bound=gate)
-    idx = np.asarray(idx).reshape(len(Y), kq)
-    valid = np.isfinite(np.asarray(d).reshape(len(Y), kq))
-    other = valid & (lab[np.minimum(idx, len(Y) - 1)] != lab[:, None])
-    has = other.any(axis=1)
-    a = np.nonzero(has)[0]
-    b = idx[a, np.argmax(other[a], axis=1)]
-    H = np.zeros((6 * n, 6 * n))
-    g = np.zeros(6 * n)
     k2 = kern**2
-    cost = k2 * float(len(Y) - len(a))
-    if len(a):
-        r = Y[a] - Y[b]
-        O = Om[b]
-        d2 = np.einsum("ni,nij,nj->n", r, O, r)
-        cost += float(np.sum(k2 * d2 / (k2 + d2)))
-        w = (k2 / (k2 + d2)) ** 2
-
-        def jac(X: np.ndarray) -> np.ndarray:
-            J = np.zeros((len(X), 3, 6))
-            J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
-            J[:, 0, 4], J[:, 0, 5] = X[:, 2], -X[:, 1]
-            J[:, 1, 3], J[:, 1, 5] = -X[:, 2], X[:, 0]
-            J[:, 2, 3], J[:, 2, 4] = X[:, 1], -X[:, 0]
-            return J
-
-        Ja, Jb = jac(Y[a]), -jac(Y[b])
-        WO = w[:, None, None] * O
-        Hb = np.zeros((n, n, 6, 6))
-        for (J1, l1), (J2, l2) in itertools.product(((Ja, lab[a]), (Jb, lab[b])), repeat=2):
-            np.add.at(Hb, (l1, l2), np.einsum("nai,nab,nbj->nij", J1, WO, J2))
-        H += Hb.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
-        for J1, l1 in ((Ja, lab[a]), (Jb, lab[b])):
-            gi = np.einsum("nai,nab,nb->ni", J1, WO, r)
-            np.add.at(g.reshape(n, 6), l1, gi)
+    H, g, cost = _pair_system(Y, a, b, lab, Om, k2, n)
+    cost += k2 * float(len(Y) - len(a))
     if c.init_prior in ("motion", "velocity"):
         cost += _motion_terms(used, sa, H, g)
     if c.init_prior == "velocity":
@@ -311,28 +288,144 @@ def _joint_system(
     return H, g, cost
 
 
+def _window_pairs(
+    nav: Navigator, used: list[WindowFrame], gate: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The window's map points at the current poses and their pairs (:func:`_joint_system`):
+    ``(Y, lab, Om, a, b)``, the points ``Y`` (N, 3, target frame, m), their frames ``lab``
+    (N,), plane information ``Om`` (N, 3, 3) and the pairs ``Y[a] ↔ Y[b]``."""
+    c, s0 = nav.config, nav.spacing0
+    n = len(used)
+    Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
+    lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
+    tree = _kd_build_select(Y, 16)
+    dn, nb = _kd_knn(*tree, Y, min(c.k_neighbors, len(Y)))
+    Om, _ = plane_information(Y, nb, c.init_inplane_sigma * s0, c.noise_floor * s0)
+    # the pair: the nearest point of another frame among the ``kq`` nearest within the gate,
+    # found among the plane neighbours first, the few points they do not settle queried again
+    kq = min(len(Y), 2 * n + 8)
+    dn, nb = dn[:, :kq], nb[:, :kq]
+    other = (dn < gate) & (lab[nb] != lab[:, None])
+    b = np.where(other.any(axis=1), nb[np.arange(len(Y)), np.argmax(other, axis=1)], -1)
+    more = np.nonzero((b < 0) & (dn[:, -1] < gate) & (kq > nb.shape[1]))[0]
+    if len(more):
+        _, idx = _kd_knn_within(*tree, Y[more], kq, np.full(len(more), gate**2))
+        other = (idx >= 0) & (lab[idx] != lab[more, None])
+        b[more] = np.where(
+            other.any(axis=1), idx[np.arange(len(more)), np.argmax(other, axis=1)], -1
+        )
+    a = np.nonzero(b >= 0)[0]
+    return Y, lab, Om, a, b[a]
+
+
+@njit(cache=True)
+def _pair_system(
+    Y: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    lab: np.ndarray,
+    Om: np.ndarray,
+    k2: float,
+    n: int,
+) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover - numba
+    """Normal equations ``(H, g)`` (6n) and robust cost of the pairs ``Y[a] ↔ Y[b]``.
+
+    Residual ``r = Y[a] − Y[b]`` (target frame, m) with information ``Om[b]`` (3×3), weight
+    ``(k²/(k² + d²))²`` and cost ``k² d² / (k² + d²)`` (Geman–McClure, ``d² = rᵀ Ω r``); the
+    Jacobians in the left perturbations ``(δt, δθ)`` of the poses of frames ``lab[a]`` and
+    ``lab[b]`` are ``[I, −[Y[a]]×]`` and ``−[I, −[Y[b]]×]``.
+    """
+    H = np.zeros((6 * n, 6 * n))
+    g = np.zeros(6 * n)
+    cost = 0.0
+    J = np.zeros((2, 3, 6))
+    for s in range(2):
+        for i in range(3):
+            J[s, i, i] = 1.0 if s == 0 else -1.0
+    WJ = np.zeros((3, 6))
+    for m in range(len(a)):
+        p, q = a[m], b[m]
+        r = Y[p] - Y[q]
+        O = Om[q]
+        Or = O @ r
+        d2 = r[0] * Or[0] + r[1] * Or[1] + r[2] * Or[2]
+        cost += k2 * d2 / (k2 + d2)
+        w = (k2 / (k2 + d2)) ** 2
+        for s, X in ((0, Y[p]), (1, Y[q])):
+            sg = 1.0 if s == 0 else -1.0
+            J[s, 0, 4], J[s, 0, 5] = sg * X[2], -sg * X[1]
+            J[s, 1, 3], J[s, 1, 5] = -sg * X[2], sg * X[0]
+            J[s, 2, 3], J[s, 2, 4] = sg * X[1], -sg * X[0]
+        fr = (lab[p], lab[q])
+        for t in range(2):
+            # WJ = w O J_t
+            for i in range(3):
+                for j in range(6):
+                    WJ[i, j] = w * (
+                        O[i, 0] * J[t, 0, j] + O[i, 1] * J[t, 1, j] + O[i, 2] * J[t, 2, j]
+                    )
+            ct = 6 * fr[t]
+            for s in range(2):
+                cs = 6 * fr[s]
+                for i in range(6):
+                    for j in range(6):
+                        H[cs + i, ct + j] += (
+                            J[s, 0, i] * WJ[0, j] + J[s, 1, i] * WJ[1, j] + J[s, 2, i] * WJ[2, j]
+                        )
+            for j in range(6):
+                g[ct + j] += w * (J[t, 0, j] * Or[0] + J[t, 1, j] * Or[1] + J[t, 2, j] * Or[2])
+    return H, g, cost
+
+
+@njit(cache=True)
+def _step_error(Ts: np.ndarray, vdt: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``log(T₀⁻¹ T₁) − log(T₁⁻¹ T₂)`` for three poses ``Ts`` (3, 4, 4), or
+    ``log(T₀⁻¹ T₁) − vdt`` for two."""
+    D = np.empty((len(Ts) - 1, 4, 4))
+    for m in range(len(Ts) - 1):
+        Ri = Ts[m, :3, :3].T.copy()
+        Ti = np.eye(4)
+        Ti[:3, :3] = Ri
+        Ti[:3, 3] = -(Ri @ Ts[m, :3, 3].copy())
+        D[m] = Ti @ Ts[m + 1]
+    e = _log(D[0])
+    return e - (_log(D[1]) if len(Ts) == 3 else vdt)
+
+
+@njit(cache=True)
+def _step_jacobian(
+    Ts: np.ndarray, vdt: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """:func:`_step_error` and its Jacobian (6, 6·len(Ts)) by central differences in the
+    poses' left perturbations."""
+    eps = 1e-6
+    e = _step_error(Ts, vdt)
+    J = np.zeros((6, 6 * len(Ts)))
+    for m in range(len(Ts)):
+        for q in range(6):
+            dq = np.zeros(6)
+            dq[q] = eps
+            Tp, Tm = Ts.copy(), Ts.copy()
+            Tp[m] = _exp(dq) @ Ts[m]
+            Tm[m] = _exp(-dq) @ Ts[m]
+            J[:, 6 * m + q] = (_step_error(Tp, vdt) - _step_error(Tm, vdt)) / (2 * eps)
+    return e, J
+
+
 def _add_pose_term(
-    err: Callable[..., np.ndarray],
     poses: list[np.ndarray],
     ids: list[int],
     W: np.ndarray,
     H: np.ndarray,
     g: np.ndarray,
+    vdt: np.ndarray | None = None,
 ) -> float:
-    """Add one term ``eᵀ W e`` with ``e = err(*poses)`` of the window frames ``ids`` to ``H`` and
-    ``g`` in place, its Jacobians by central differences in the poses' left perturbations;
-    returns the term's cost."""
-    eps = 1e-6
-    e = err(*poses)
-    J = np.zeros((6, 6 * len(poses)))
-    for m in range(len(poses)):
-        for q in range(6):
-            dq = np.zeros(6)
-            dq[q] = eps
-            Tp, Tm = list(poses), list(poses)
-            Tp[m] = exp_se3(dq) @ poses[m]
-            Tm[m] = exp_se3(-dq) @ poses[m]
-            J[:, 6 * m + q] = (err(*Tp) - err(*Tm)) / (2 * eps)
+    """Add one term ``eᵀ W e`` of the window frames ``ids`` to ``H`` and ``g`` in place, ``e``
+    the constant-velocity error of three poses or the step-against-``vdt`` error of two
+    (:func:`_step_error`), its Jacobians by central differences in the poses' left
+    perturbations; returns the term's cost."""
+    v = np.zeros(6) if vdt is None else np.asarray(vdt, dtype=np.float64)
+    e, J = _step_jacobian(np.stack(poses).astype(np.float64), v)
     for p_, ip in enumerate(ids):
         Jp = J[:, 6 * p_ : 6 * p_ + 6]
         g[6 * ip : 6 * ip + 6] += Jp.T @ W @ e
@@ -349,14 +442,11 @@ def _motion_terms(used: list[WindowFrame], sa: np.ndarray, H: np.ndarray, g: np.
     Wm = np.diag(1.0 / sa**2)
     cost = 0.0
 
-    def err(Ta: np.ndarray, Tb: np.ndarray, Tc: np.ndarray) -> np.ndarray:
-        return log_se3(invert(Ta) @ Tb) - log_se3(invert(Tb) @ Tc)
-
     for i in range(len(used) - 2):
         fa, fb, fc = used[i], used[i + 1], used[i + 2]
         if fb.frame != fa.frame + 1 or fc.frame != fb.frame + 1:
             continue
-        cost += _add_pose_term(err, [fa.pose, fb.pose, fc.pose], [i, i + 1, i + 2], Wm, H, g)
+        cost += _add_pose_term([fa.pose, fb.pose, fc.pose], [i, i + 1, i + 2], Wm, H, g)
     return cost
 
 
@@ -383,10 +473,7 @@ def _velocity_terms(
         except np.linalg.LinAlgError:
             return cost
 
-        def err(Ta: np.ndarray, Tb: np.ndarray, _dt: float = dt) -> np.ndarray:
-            return log_se3(invert(Ta) @ Tb) - v * _dt
-
-        cost += _add_pose_term(err, [fa.pose, fb.pose], [i, j], W, H, g)
+        cost += _add_pose_term([fa.pose, fb.pose], [i, j], W, H, g, v * dt)
     return cost
 
 
@@ -444,8 +531,9 @@ def refine_window(nav: Navigator) -> None:
     )
     accepted = True
     if c.init_solver == "joint" and len(used) > 2:
-        rounds = _joint_refine(nav, used, gate, sa)
-        if c.init_check and not _joint_is_surer(nav, used, gate, sa):
+        memo: PairMemo = {}
+        rounds = _joint_refine(nav, used, gate, sa, memo)
+        if c.init_check and not _joint_is_surer(nav, used, gate, sa, memo):
             accepted = False
             for f, T0 in zip(frames, before, strict=True):
                 f.pose = T0
