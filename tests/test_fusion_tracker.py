@@ -182,6 +182,22 @@ def test_track_sequence_registration_observer(tmp_path: Path) -> None:
     assert res2.n_flagged == 0
 
 
+def test_track_sequence_keeps_an_explicit_init(tmp_path: Path) -> None:
+    """Without ``omega0`` the rate is taken from the first two observations by default
+    (``init="rate"``), but a caller's ``init="first"`` is kept (the filter starts at the
+    first frame at rest and learns the rate from the updates)."""
+    _write_spin_sequence(tmp_path / "seq", frames=4, drop_lidar=None)
+    default = track_sequence(
+        tmp_path / "seq", observer="registration", second_sensor=None, q=Q_RIGID
+    )
+    first = track_sequence(
+        tmp_path / "seq", observer="registration", second_sensor=None, q=Q_RIGID, init="first"
+    )
+    # the spin is 5 deg/s about z: "rate" has it at the second frame, "first" still lags
+    assert abs(math.degrees(default.omega[1, 2]) - 5.0) < 0.5
+    assert math.degrees(first.omega[1, 2]) < 4.0
+
+
 def test_track_sequence_errors(tmp_path: Path) -> None:
     with pytest.raises(InputError):
         track_sequence(tmp_path / "nothing")

@@ -651,7 +651,7 @@ def track_sequence(
             if obs_impl.noise != "reported":  # the filter its noise was calibrated with
                 for key, value in CALIBRATION_FILTER_OPTIONS.items():
                     tracker_options.setdefault(key, value)
-    if tracker_options.get("omega0") is None and tracker_options.get("init", "first") == "first":
+    if tracker_options.get("omega0") is None and tracker_options.get("init") is None:
         tracker_options["init"] = "rate"  # an unknown rate: from the first two attitudes
     tracker = Tracker(filter, **tracker_options)
     steps = np.diff(times)
