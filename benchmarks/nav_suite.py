@@ -376,7 +376,8 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{name:22s} relnav / best peer: APE {own['ape'] / best_ape:.2f}  "
                 f"RPE_t {own['rpe_t'] / best_rpe:.2f}  RPE_r {own['rpe_r'] / best_rpr:.2f}  "
-                f"time / kiss-icp {own['ms'] / kiss:.2f} (whole run {own['wall_s'] / kiss_run:.2f})",
+                f"time / kiss-icp {own['ms'] / kiss:.2f} "
+                f"(whole run {own['wall_s'] / kiss_run:.2f})",
                 flush=True,
             )
     if a.json:

@@ -320,6 +320,21 @@ def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
     assert not any(s.used_prior for s in tight.steps[1:])
 
 
+def test_relabelled_merged_frames_still_observe_the_relative_state(orbit_seq):
+    """A step relabelled ``degenerate`` by an alert limit went into the map all the same
+    (``in_map``): the relative state takes it as an observation, so the state is that of the
+    unmonitored run."""
+    from relnav.navigation.options import in_map
+    from relnav.navigation.state import StateRecord, relative_state
+
+    free = run_sequence(orbit_seq, "relnav", max_frames=12)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=12, alert_limit_t=1e-6)
+    assert all(in_map(s) and StateRecord.from_step(s).merged for s in tight.steps)
+    a, b = relative_state(free), relative_state(tight)
+    np.testing.assert_allclose(b.position, a.position)
+    np.testing.assert_allclose(b.omega, a.omega)
+
+
 def test_step_flags_label_steps_without_changing_poses(orbit_seq):
     """``flag_probability``: a step whose covariance puts its error beyond the flag limits with
     a higher probability is ``flagged`` (a label: poses identical to an unflagged run); on the

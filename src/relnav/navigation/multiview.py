@@ -74,7 +74,7 @@ from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
 from relnav.geometry.lie import _exp, _log, exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
-from relnav.navigation.options import MERGED_STATUSES
+from relnav.navigation.options import in_map
 from relnav.navigation.voxel_map import even_subset, plane_information
 
 if TYPE_CHECKING:
@@ -145,8 +145,7 @@ def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometrySte
         return
     # in the map: the first frame and every step merged into it (an integrity label such as
     # ``degenerate`` over the alert limit does not take a merged scan out of the map)
-    merged = out.result is not None and bool(out.result.info.get("merged"))
-    ok = P is not None and (out.status in MERGED_STATUSES or merged)
+    ok = P is not None and in_map(out)
     f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
     if ok:
         assert P is not None

@@ -55,7 +55,7 @@ from relnav.navigation.gicp import (
     solve_scan_to_map,
 )
 from relnav.navigation.motion import ConstantVelocityFilter
-from relnav.navigation.options import NavigatorConfig
+from relnav.navigation.options import NavigatorConfig, in_map
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
@@ -455,7 +455,7 @@ class Navigator:
         cov = out.result.info.get("step_covariance") if out.result is not None else None
         Pm = None if P is None else even_subset(P, c.max_map_points)
         P_pose = self.motion.P[:6, :6] if self.motion is not None else None
-        self.loop_closer.observe(self.n_frames - 1, out.status, Pm, cov, P_pose)
+        self.loop_closer.observe(self.n_frames - 1, in_map(out), Pm, cov, P_pose)
         out.time_s += time.perf_counter() - ts
         return out
 

@@ -8,14 +8,31 @@ Every option is documented with what it does and, where it was chosen on the nav
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
-__all__ = ["MERGED_STATUSES", "NavigatorConfig"]
+__all__ = ["MERGED_STATUSES", "NavigatorConfig", "in_map"]
 
 MERGED_STATUSES = ("ok", "first", "flagged")
 """Statuses of the navigator's frames whose pose is the registration's and whose scan went into
 the map (``flagged``: an ``ok`` step labelled by ``flag_probability``, see
 :class:`NavigatorConfig`)."""
+
+
+def in_map(step: Any) -> bool:
+    """Did the frame's scan go into the navigator's map?
+
+    Its status is one of :data:`MERGED_STATUSES`, or the scan was merged and an integrity
+    check relabelled the step afterwards (``degenerate`` over an alert limit): the
+    ``merged`` attribute of a :class:`relnav.navigation.state.StateRecord` or the
+    ``result.info["merged"]`` of an :class:`relnav.odometry.OdometryStep`.
+    """
+    if step.status in MERGED_STATUSES:
+        return True
+    merged = getattr(step, "merged", None)
+    if merged is None:
+        result = getattr(step, "result", None)
+        merged = result is not None and result.info.get("merged")
+    return bool(merged)
 
 
 @dataclass

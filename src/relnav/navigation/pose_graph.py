@@ -66,7 +66,6 @@ from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.pose_graph import PoseGraph, PoseGraphResult
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
-from relnav.navigation.options import MERGED_STATUSES
 from relnav.navigation.voxel_map import VoxelMap
 
 __all__ = [
@@ -300,20 +299,21 @@ class LoopCloser:
     def observe(
         self,
         frame: int,
-        status: str,
+        merged: bool,
         points: np.ndarray | None,
         step_covariance: np.ndarray | None,
         pose_covariance: np.ndarray | None = None,
     ) -> None:
-        """Record one frame: its status, scan points (sensor frame, m; kept for accepted
-        frames), the covariance of its step and of its pose (6×6, right perturbation; None:
-        unknown)."""
+        """Record one frame: whether its scan went into the map
+        (:func:`~relnav.navigation.options.in_map`), its scan points (sensor frame, m; kept for
+        merged frames), the covariance of its step and of its pose (6×6, right perturbation;
+        None: unknown)."""
         t0 = time.perf_counter()
         if step_covariance is not None and np.all(np.isfinite(step_covariance)):
             self._step_cov[frame] = np.array(step_covariance, dtype=np.float64)
         if pose_covariance is not None and np.all(np.isfinite(pose_covariance)):
             self._pose_cov[frame] = np.array(pose_covariance, dtype=np.float64)
-        if status in MERGED_STATUSES and points is not None and len(points) >= 3:
+        if merged and points is not None and len(points) >= 3:
             self._points[frame] = np.array(points, dtype=np.float64)
         self.time_observe_s += time.perf_counter() - t0
 

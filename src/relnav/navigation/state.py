@@ -32,7 +32,7 @@ from relnav.fusion.multiple_model import mix_tracks
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.options import MERGED_STATUSES
+from relnav.navigation.options import in_map
 
 __all__ = [
     "StateRecord",
@@ -118,12 +118,16 @@ class StateRecord:
         The scan's own information about the pose (left twist, target frame).
     step_covariance : (6, 6) float64 or None
         Covariance of the step that led to this pose (body frame, right twist ``[ρ, φ]``).
+    merged : bool or None
+        Whether the scan went into the map (:func:`~relnav.navigation.options.in_map`; None:
+        as its status says).
     """
 
     status: str
     pose: np.ndarray
     information: np.ndarray | None = None
     step_covariance: np.ndarray | None = None
+    merged: bool | None = None
 
     @classmethod
     def from_step(cls, step: Any) -> StateRecord:
@@ -134,6 +138,7 @@ class StateRecord:
             np.array(step.pose, dtype=float),
             info.get("information"),
             info.get("step_covariance"),
+            in_map(step),
         )
 
 
@@ -348,7 +353,7 @@ def relative_state(
     observations: list[Observation | None] = []
     for index, (step, share) in enumerate(zip(frames, shares, strict=True)):
         H = step.information
-        if step.status not in MERGED_STATUSES:
+        if not in_map(step):
             observations.append(None)
             continue
         T_st = invert(step.pose)
@@ -547,7 +552,7 @@ def startup_bias(
         ``[δp (m, sensor frame of the first update), δθ (rad, target axes)]`` of the offset,
         block diagonal.
     """
-    merged = [k for k, s in enumerate(steps) if s.status in MERGED_STATUSES]
+    merged = [k for k, s in enumerate(steps) if in_map(s)]
     later = [k for k in merged[1:] if steps[k].step_covariance is not None]
     start_up = later[: int(n_frames)] if n_frames > 0 else []
     C = np.zeros((6, 6))
@@ -622,7 +627,7 @@ def map_drift_shares(steps: Sequence[Any], memory: float = 20.0) -> np.ndarray:
     (N,) float64
         ``1 / min(n, memory)`` per frame, in (0, 1].
     """
-    merged = np.cumsum([s.status in MERGED_STATUSES for s in steps])
+    merged = np.cumsum([in_map(s) for s in steps])
     n = np.maximum(np.concatenate([[0], merged[:-1]]), 1).astype(float)
     return 1.0 / np.minimum(n, float(memory))
 
@@ -655,7 +660,7 @@ def pose_noise(steps: Sequence[Any], frame: str = "sensor") -> tuple[float, floa
     if frame not in ("sensor", "target"):
         raise ConfigError(f"frame must be 'sensor' or 'target', got {frame!r}")
     poses = [s.pose for s in steps]
-    ok = [s.status in MERGED_STATUSES for s in steps]
+    ok = [in_map(s) for s in steps]
     d2 = []
     for k in range(2, len(poses)):
         if ok[k] and ok[k - 1] and ok[k - 2]:
