@@ -182,17 +182,12 @@ def relative_state(
         noise added to each scan's covariance is measured in the observations' coordinates
         (``pose_noise(frame="target")``). ``"poses"`` (the former default): per frame period
         the state may move by one step of the poses' white noise (:func:`pose_noise`, sensor
-        axes), its rates by one such step per period. Measured ``"poses"`` → ``"physics"``
-        after the first 30 % of the frames (``docs/results/nav/state_process_noise.md``):
-        envisat-tumble-64 (hold point, 1°/s spin, 20 noise seeds) rate error median/p95/max
-        0.031/0.074/0.188 → 0.027/0.069/0.172 deg/s, block NEES position/velocity/attitude/
-        rate 3.08/0.30/0.63/0.22 → 0.98/0.34/3.34/0.42 (12-dim 4.5 → 5.2, band 9.9–14.2),
-        RMS position 0.66 → 0.11 m, velocity 21 → 0.8 mm/s, but attitude 2.8 → 3.5°. On the
-        other 16 suite sequences (one run each) the position error falls on 12 (e.g.
-        aura-ellipse-64 1.32 → 0.37 m) and the attitude error on 13 (eros-ellipse-64 11.6 →
-        1.4°); orion-inclined-64 gets worse (0.06 → 0.14 m, 27 → 30° about its symmetry axis,
-        wrong either way; mean NEES 46 → 117). The torque-free bound holds for a chaser holding
-        an inertial attitude, not for the rate relative to a slewing sensor.
+        axes), its rates by one such step per period. **[measured]** ``"physics"`` lowers the
+        position error on 12 of the 16 other suite sequences and the attitude error on 13,
+        and envisat-tumble-64's rate error (20 noise seeds, max 0.188 → 0.172 deg/s), but
+        orion-inclined-64 gets worse (``docs/results/nav/state_process_noise.md``). The
+        torque-free bound holds for a chaser holding an inertial attitude, not for the rate
+        relative to a slewing sensor.
     acceleration : float
         With ``process_noise="physics"``: 1σ of the unmodelled relative acceleration, m/s²
         (default 1e-4, the order of the Clohessy–Wiltshire terms ``3n²r`` a free model leaves
@@ -205,19 +200,13 @@ def relative_state(
         and 1/100 of that bound, mixed by the likelihood of their innovations
         (:func:`relnav.fusion.multiple_model.mix_tracks`, probability floor 1e-3), so that the
         data tell a target spinning about a principal axis (``ω̇ = 0``) from a tumbling one
-        (one filter, as ``None``, with ``process_noise="poses"`` or a caller's ``q``).
-        Measured bound → adaptive after the first 30 % of the frames (``python
-        benchmarks/nav_state.py --out bench/nav --seeds 20 [-S angular_acceleration=adaptive]``):
-        envisat-tumble-64 (1°/s about a principal axis, 20 noise seeds) rate error
-        median/p95/max 0.027/0.069/0.172 → 0.014/0.046/0.060 deg/s, 12-dim NEES 5.2 → 4.7
-        (band 9.9–14.2); aura-tumble-64 (held out) 0.049/0.096/0.181 → 0.052/0.155/0.199 (the
-        1/10 member takes up to 40 % in one segment). One run of every suite sequence (``--compare
-        suite -S angular_acceleration=adaptive``): iridium-helical-64 attitude 13.9 → 9.0°,
-        rate max 0.085 → 0.053 deg/s, but orion-inclined-64 position 0.14 → 0.48 m,
-        sim-helical attitude 0.04 → 0.28°, asteroid-helical-128 0.82 → 1.25°: a member whose
-        rate lags the truth keeps the higher likelihood while the observer-bias state absorbs
-        its attitude error; a bank of 1 and 1/10 alone does the same (sim-helical 0.28°,
-        orion-inclined-64 0.21 m, aura p95 0.155 deg/s). Not the default.
+        (one filter, as ``None``, with ``process_noise="poses"`` or a caller's ``q``). Not
+        the default: over 20 noise seeds it brings envisat-tumble-64's worst rate error after
+        convergence from 0.172 to 0.060 deg/s, but the held-out aura-tumble-64's 95th
+        percentile goes 0.096 → 0.155 deg/s and orion-inclined-64, sim-helical and
+        asteroid-helical-128 get worse (a member whose rate lags the truth keeps the higher
+        likelihood while the observer bias absorbs its attitude error; README, "Full
+        relative state on a tumbling target").
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
         ``"step"`` (default): all of it, every frame. ``"map"`` **[interpretation]**: the
@@ -228,15 +217,8 @@ def relative_state(
         the bias. Measured against the truth (envisat-tumble-64), the map's rotation error is
         set in the first ~10 frames (the weak first prior) and then stays within ±0.3°, while
         its translation error in target axes jumps by 0.3 m for 50–90 frames at some views and
-        comes back (not white, not the map). ``"step"`` → ``"map"`` (20 noise seeds, after the
-        first 30 % of the frames, ``benchmarks/nav_state.py --seeds 20 -S drift=map``,
-        ``docs/results/nav/state_drift.md``): envisat-tumble-64 rate error median/p95/max
-        0.027/0.069/0.172 → 0.028/0.069/0.172 deg/s, RMS attitude 3.54 → 3.12° (about x/y
-        0.51/0.59 → 0.28/0.25°), position 0.108 → 0.088 m, block NEES position/velocity/
-        attitude/rate 0.98/0.34/3.34/0.42 → 0.80/0.34/4.43/0.67, 12-dim 5.2 → 5.9 (band
-        9.9–14.2, 0 % of the steps inside); aura-tumble-64 (held out) 0.049/0.096/0.181 →
-        0.056/0.123/0.238 deg/s, 12-dim 2.6 → 5.5, position 0.121 → 0.159 m. Not the default:
-        the NEES stays far below its band and the held-out rate error gets worse.
+        comes back (not white, not the map). Not the default: the NEES stays far below its
+        band and the held-out rate error gets worse (``docs/results/nav/state_drift.md``).
     map_memory : float
         With ``drift="map"``: the frames after which a map voxel's running mean forgets
         geometrically (the navigator's ``max_voxel_weight``, default 20).
@@ -246,60 +228,21 @@ def relative_state(
         variance by ``drift_scale · drift_rotation_scale``.
     measurement_scale : float
         Scale (> 0, default 1) of each observation's covariance (the scan's ``H⁻¹`` with the
-        poses' white noise).
-        **[measured]** (``benchmarks/nav_state.py --out /work/nav --seeds 20 -S …``, after the
-        first 30 % of the frames, ``docs/results/nav/state_noise_scales.md``). Default:
-        envisat-tumble-64 block NEES position/velocity/attitude/rate 0.98/0.34/3.34/0.42,
-        12-dim 5.2 (band 9.9–14.2), rate error median/p95/max 0.027/0.069/0.172 deg/s;
-        aura-tumble-64 (held out) 0.64/0.22/1.03/0.68, 2.6, 0.049/0.096/0.181. Truth-free,
-        :func:`fit_noise_scales` on the 20 envisat runs (summed innovation log-likelihood
-        95 024 → 102 755) gives ``drift_scale`` 1.31, ``drift_rotation_scale`` 0.47 and
-        ``measurement_scale`` at its bound 1e-3 (the innovations look like the bias's random
-        walk, hardly white): envisat 1.14/0.40/8.72/1.13, 12-dim 12.6 (24 % of the steps
-        inside the band), rate 0.039/0.082/0.213; aura (log-likelihood 96 766 → 106 986)
-        0.83/0.26/7.86/1.42, 10.2 (39 %), rate 0.053/0.115/0.211; with
-        ``angular_acceleration="adaptive"`` envisat 0.73/0.38/14.2/8.5, rate 0.015/0.042/0.212.
-        Truth-based moment matching of the four blocks over the same three scales (envisat,
-        Nelder–Mead, 30 evaluations) ends at ``drift_scale`` 0.15, ``drift_rotation_scale`` 2.8,
-        ``measurement_scale`` 3.2: 5.76/1.90/7.01/0.86, 12-dim 13.4 (52 %), rate 0.034/0.103/
-        0.214 (log-likelihood 88 045); ``drift_scale=0.3`` alone 3.11/1.11/7.66/0.89, 12.1
-        (49 %), rate 0.031/0.088/0.238, aura 2.51/0.71/2.35/0.92, 7.3, 0.045/0.096/0.211. The
-        12-dim NEES reaches its band either way, no block pattern near 3 does: less drift
-        leaves the bias less freedom, which raises the position and velocity blocks, but the
-        attitude block (overconfident about the spin axis) faster, and the rate error grows.
-        One run of every suite sequence (``--compare suite``) with the fitted scales:
-        iridium-helical-64 attitude 13.9 → 22.7°, rate max 0.085 → 0.130 deg/s,
-        envisat-tumble-64 1.06 → 2.50°, aura-ellipse-64 2.85 → 3.18° (the sim-* and
-        eros-ellipse-64 a little better); with ``drift_scale=0.3`` iridium 13.9 → 16.7°,
-        envisat 1.06 → 2.74°. Not the default.
+        poses' white noise). **[measured]** No setting of the three scales, fitted to the
+        innovations' likelihood without the truth (:func:`fit_noise_scales`) or to the
+        truth's NEES, brings every block of the NEES near 3 (less drift raises the position
+        and velocity blocks, but the attitude block faster), and the fitted scales make
+        iridium-helical-64's attitude worse (13.9 → 22.7°;
+        ``docs/results/nav/state_noise_scales.md``).
     initial_bias : int
         Start-up frames whose drift is the map's initial offset (default 0: none, the bias
         starts at zero covariance at the first frame and grows frame by frame). With ``N > 0``
         the observer bias takes at the first update the sum of the first ``N`` merged frames'
         step covariances (translation and rotation blocks, their correlation dropped, not
         scaled by ``drift_scale``; :func:`startup_bias`), those frames add no drift of their
-        own and the later ones the scaled drift. **[measured]** (``benchmarks/nav_state.py
-        --out /work/nav --seeds 20 -S initial_bias=…``, after the first 30 % of the frames,
-        ``docs/results/nav/state_initial_bias.md``), envisat-tumble-64 (SUITE) block NEES
-        position/velocity/attitude/rate, 12-dim (share of steps in the band 9.9–14.2), rate
-        error median/p95/max deg/s: default 0.98/0.34/3.34/0.42, 5.2 (0 %), 0.027/0.069/
-        0.172; ``N=10`` 2.69/1.00/4.06/0.52, 7.9 (14 %), 0.032/0.072/0.190; ``N=5``
-        1.28/0.44/6.12/0.58, 8.4 (32 %); ``N=15`` 4.55/1.55/4.84/0.60, 11.9 (51 %), 0.035/
-        0.076/0.185; ``N=10, drift_scale=0.7`` 3.15/1.18/4.37/0.59, 8.8 (18 %), 0.031/0.074/
-        0.208; ``N=10, drift_scale=0.5`` 3.80/1.45/5.21/0.71, 10.6 (49 %), 0.033/0.078/0.227;
-        ``N=10, drift_scale=0.3`` 5.36/2.11/7.65/1.00, 15.1 (45 %), 0.036/0.088/0.255;
-        ``N=10, drift_rotation_scale=0.5`` 2.74/1.03/3.30/0.55, 7.4 (4 %), 0.030/0.067/0.196.
-        aura-tumble-64 (HELD OUT) default 0.64/0.22/1.03/0.68, 2.6, 0.049/0.096/0.181;
-        ``N=10`` 0.50/0.20/1.03/0.71, 2.4, 0.052/0.101/0.184. The rate block stays below 1
-        (the torque-free bound) whatever the start-up, so no setting has every block near 3;
-        the attitude error about the target's z axis stays (3.45 → 3.69° rms) and the
-        attitude's σ still shrinks during the run (seed 0: 3.6° at the first update → 2.0°
-        at the end): the positions, through the body-fixed position bias, take the offset's
-        variance away (with ``bias_frame="sensor"`` or uninformative positions it stays).
-        One run of every suite sequence (``--compare suite -S initial_bias=10``):
-        envisat-tumble-64 attitude 1.06 → 2.36°, iridium-helical-64 13.9 → 17.1° (rate max
-        0.085 → 0.099 deg/s); the others at most +0.18° (aura-ellipse-64 2.85 → 3.03°). Not
-        the default.
+        own and the later ones the scaled drift. Not the default: the rate block stays below
+        1 whatever the start-up, and envisat-tumble-64's and iridium-helical-64's attitude get
+        worse (1.06 → 2.36°, 13.9 → 17.1°; ``docs/results/nav/state_initial_bias.md``).
     **tracker_options
         Passed to :class:`relnav.fusion.tracker.Tracker` (``q`` replaces the process noise above,
         ``p0``, ``omega0``, ``gate_probability`` …). With the
