@@ -205,8 +205,8 @@ def relative_state(
         convergence from 0.172 to 0.060 deg/s, but the held-out aura-tumble-64's 95th
         percentile goes 0.096 → 0.155 deg/s and orion-inclined-64, sim-helical and
         asteroid-helical-128 get worse (a member whose rate lags the truth keeps the higher
-        likelihood while the observer bias absorbs its attitude error; README, "Full
-        relative state on a tumbling target").
+        likelihood while the observer bias absorbs its attitude error;
+        ``docs/navigator.md``, "Full relative state on a tumbling target").
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
         ``"step"`` (default): all of it, every frame. ``"map"`` **[interpretation]**: the
