@@ -320,6 +320,18 @@ def _window_pairs(
     return Y, lab, Om, a, b[a]
 
 
+@njit(cache=True, inline="always")
+def _times_skew(
+    M: np.ndarray, x: np.ndarray, out: np.ndarray, transpose: bool
+) -> None:  # pragma: no cover - numba
+    """``out = M [x]×`` (or ``Mᵀ [x]×``) for 3×3 ``M``, ``[x]×`` the cross-product matrix."""
+    for i in range(3):
+        m0, m1, m2 = (M[0, i], M[1, i], M[2, i]) if transpose else (M[i, 0], M[i, 1], M[i, 2])
+        out[i, 0] = m1 * x[2] - m2 * x[1]
+        out[i, 1] = m2 * x[0] - m0 * x[2]
+        out[i, 2] = m0 * x[1] - m1 * x[0]
+
+
 @njit(cache=True)
 def _pair_system(
     Y: np.ndarray,
@@ -333,49 +345,74 @@ def _pair_system(
     """Normal equations ``(H, g)`` (6n) and robust cost of the pairs ``Y[a] ↔ Y[b]``.
 
     Residual ``r = Y[a] − Y[b]`` (target frame, m) with information ``Om[b]`` (3×3), weight
-    ``(k²/(k² + d²))²`` and cost ``k² d² / (k² + d²)`` (Geman–McClure, ``d² = rᵀ Ω r``); the
+    ``w = (k²/(k² + d²))²`` and cost ``k² d² / (k² + d²)`` (Geman–McClure, ``d² = rᵀ Ω r``); the
     Jacobians in the left perturbations ``(δt, δθ)`` of the poses of frames ``lab[a]`` and
-    ``lab[b]`` are ``[I, −[Y[a]]×]`` and ``−[I, −[Y[b]]×]``.
+    ``lab[b]`` are ``J_a = [I, −A]`` and ``J_b = −[I, −B]`` (``A = [Y[a]]×``, ``B = [Y[b]]×``).
+    With ``W = w Ω``, ``P = W A``, ``Q = W B`` and ``Xᵀ = −X`` the blocks are ``J_aᵀ W J_a =
+    [[W, −P], [−Pᵀ, Pᵀ A]]``, ``J_aᵀ W J_b = −[[W, −Q], [−Pᵀ, Pᵀ B]]``, ``J_bᵀ W J_b =
+    [[W, −Q], [−Qᵀ, Qᵀ B]]`` and ``J_bᵀ W J_a`` the transpose of the second.
     """
     H = np.zeros((6 * n, 6 * n))
     g = np.zeros(6 * n)
     cost = 0.0
-    J = np.zeros((2, 3, 6))
-    for s in range(2):
-        for i in range(3):
-            J[s, i, i] = 1.0 if s == 0 else -1.0
-    WJ = np.zeros((3, 6))
+    W = np.empty((3, 3))
+    P = np.empty((3, 3))
+    Q = np.empty((3, 3))
+    PA = np.empty((3, 3))
+    PB = np.empty((3, 3))
+    QB = np.empty((3, 3))
+    r = np.empty(3)
+    Or = np.empty(3)
+    v = np.empty(3)
     for m in range(len(a)):
         p, q = a[m], b[m]
-        r = Y[p] - Y[q]
+        A, B = Y[p], Y[q]
         O = Om[q]
-        Or = O @ r
+        for i in range(3):
+            r[i] = A[i] - B[i]
+        for i in range(3):
+            Or[i] = O[i, 0] * r[0] + O[i, 1] * r[1] + O[i, 2] * r[2]
         d2 = r[0] * Or[0] + r[1] * Or[1] + r[2] * Or[2]
         cost += k2 * d2 / (k2 + d2)
         w = (k2 / (k2 + d2)) ** 2
-        for s, X in ((0, Y[p]), (1, Y[q])):
-            sg = 1.0 if s == 0 else -1.0
-            J[s, 0, 4], J[s, 0, 5] = sg * X[2], -sg * X[1]
-            J[s, 1, 3], J[s, 1, 5] = -sg * X[2], sg * X[0]
-            J[s, 2, 3], J[s, 2, 4] = sg * X[1], -sg * X[0]
-        fr = (lab[p], lab[q])
-        for t in range(2):
-            # WJ = w O J_t
-            for i in range(3):
-                for j in range(6):
-                    WJ[i, j] = w * (
-                        O[i, 0] * J[t, 0, j] + O[i, 1] * J[t, 1, j] + O[i, 2] * J[t, 2, j]
-                    )
-            ct = 6 * fr[t]
-            for s in range(2):
-                cs = 6 * fr[s]
-                for i in range(6):
-                    for j in range(6):
-                        H[cs + i, ct + j] += (
-                            J[s, 0, i] * WJ[0, j] + J[s, 1, i] * WJ[1, j] + J[s, 2, i] * WJ[2, j]
-                        )
-            for j in range(6):
-                g[ct + j] += w * (J[t, 0, j] * Or[0] + J[t, 1, j] * Or[1] + J[t, 2, j] * Or[2])
+        for i in range(3):
+            for j in range(3):
+                W[i, j] = w * O[i, j]
+        _times_skew(W, A, P, False)
+        _times_skew(W, B, Q, False)
+        _times_skew(P, A, PA, True)
+        _times_skew(P, B, PB, True)
+        _times_skew(Q, B, QB, True)
+        ia, ib = 6 * lab[p], 6 * lab[q]
+        for i in range(3):
+            for j in range(3):
+                H[ia + i, ia + j] += W[i, j]
+                H[ib + i, ib + j] += W[i, j]
+                H[ia + i, ib + j] -= W[i, j]
+                H[ib + i, ia + j] -= W[i, j]
+                H[ia + i, ia + 3 + j] -= P[i, j]
+                H[ia + 3 + j, ia + i] -= P[i, j]
+                H[ib + i, ib + 3 + j] -= Q[i, j]
+                H[ib + 3 + j, ib + i] -= Q[i, j]
+                H[ia + i, ib + 3 + j] += Q[i, j]
+                H[ib + 3 + j, ia + i] += Q[i, j]
+                H[ib + i, ia + 3 + j] += P[i, j]
+                H[ia + 3 + j, ib + i] += P[i, j]
+                H[ia + 3 + i, ia + 3 + j] += PA[i, j]
+                H[ib + 3 + i, ib + 3 + j] += QB[i, j]
+                H[ia + 3 + i, ib + 3 + j] -= PB[i, j]
+                H[ib + 3 + j, ia + 3 + i] -= PB[i, j]
+        # gradient Jᵀ W r: J_aᵀ v = [v, A v] and J_bᵀ v = −[v, B v] (A v = Y[a] × v)
+        for i in range(3):
+            v[i] = w * Or[i]
+            g[ia + i] += v[i]
+            g[ib + i] -= v[i]
+        g[ia + 3] += A[1] * v[2] - A[2] * v[1]
+        g[ia + 4] += A[2] * v[0] - A[0] * v[2]
+        g[ia + 5] += A[0] * v[1] - A[1] * v[0]
+        g[ib + 3] -= B[1] * v[2] - B[2] * v[1]
+        g[ib + 4] -= B[2] * v[0] - B[0] * v[2]
+        g[ib + 5] -= B[0] * v[1] - B[1] * v[0]
     return H, g, cost
 
 
