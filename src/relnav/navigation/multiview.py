@@ -47,14 +47,14 @@ is worse on 17 of 20 noise seeds (median APE 1.44 → 3.08 m): started at the tr
 refinement drifts 0.27° per frame away from them (its 50-point scans of a box themselves favour
 a slower rotation, which constant-velocity terms cannot see); with the check all 20 are refused.
 The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
-Cost: one refinement (or refused attempt) of 0.03–0.23 s at 64×64 and 128×128, 0.06–0.16 s on
-the presets and 0.46 s on sim-eoi's 4 000-point scans, all in the window's last frame (the pair
-system in numba, :func:`_pair_system`; the pairs found among the plane neighbours,
-:func:`_window_pairs`, and reused while the graduated kernel shrinks: the same poses as the
-first version's 0.3–3.6 s): the median time per frame is unchanged, the mean over a run is
-1.6–2.4 ms on the flash sequences (8.0 ms on asteroid-helical-128) and 3.6–6.5 ms on the
-60-frame presets (35 ms on sim-eoi); over a whole run 1.1–2.2× KISS-ICP's time on the flash
-sequences, up to 3.0× on the presets (``nav_suite.py``'s second time ratio).
+Cost: one refinement (or refused attempt) of 0.03–0.20 s at 64×64 and 128×128, 0.05–0.15 s on
+the presets and 0.40 s on sim-eoi's 4 000-point scans, all in the window's last frame (the pair
+system in numba and closed form, :func:`_pair_system`; the pairs found among the plane
+neighbours, :func:`_window_pairs`, and reused while the graduated kernel shrinks: the same poses
+as the first version's 0.3–3.6 s): the median time per frame is unchanged, the mean over a run
+is 1.6–2.5 ms on the flash sequences (8.1 ms on asteroid-helical-128) and 3.4–6.4 ms on the
+60-frame presets (34 ms on sim-eoi); over a whole run 1.0–2.2× KISS-ICP's time on the flash
+sequences, up to 2.9× on the presets (``nav_suite.py``'s second time ratio).
 """
 
 from __future__ import annotations
