@@ -105,7 +105,7 @@ def test_a_bank_of_trackers_prefers_the_model_that_generated_the_data(tmp_path):
     tight = {"position": 1e-4, "velocity": 1e-4, "attitude": 4e-3, "omega": 1e-4}
     bank = [Tracker("ukf", q=q).run(t, obs, truth=truth) for q in (loose, tight)]
     for r in bank:
-        upd = np.array([s == "update" for s in r.status])
+        upd = r.updated
         assert np.all(np.isfinite(r.log_likelihood[upd])) and np.all(
             np.isnan(r.log_likelihood[~upd])
         )
