@@ -55,11 +55,14 @@ def _finite(points: np.ndarray) -> np.ndarray:
     return points[np.all(np.isfinite(points), axis=1)]
 
 
-def probe(seq_dir: Path, frames: int, n_probe: int) -> dict[str, np.ndarray]:
-    """Errors ``(n, 2)`` (m, deg) and 1σ ``(n,)`` (m) per start; the true steps ``(n,)`` (m)."""
+def probe(
+    seq_dir: Path, frames: int, n_probe: int, options: dict[str, str] | None = None
+) -> dict[str, np.ndarray]:
+    """Errors ``(n, 2)`` (m, deg) and 1σ ``(n,)`` (m) per start; the true steps ``(n,)`` (m).
+    ``options``: the navigator's (``-O key=value``)."""
     seq = ScanSequence(seq_dir)
     gt = seq.gt_poses
-    nav = Navigator(initial_pose=gt[0], bootstrap_frames=0)
+    nav = Navigator(initial_pose=gt[0], bootstrap_frames=0, **(options or {}))
     nav.register_frame(seq[0])
     assert nav.map is not None
     for k in range(1, frames + 1):
@@ -93,7 +96,9 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=DEFAULT, help="sequence names")
     ap.add_argument("--frames", type=int, default=20, help="scans in the truth-built map")
     ap.add_argument("--probe", type=int, default=30, help="scans registered onto it")
+    ap.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
     args = ap.parse_args()
+    opts = dict(o.split("=", 1) for o in args.options)
     folders = simulate_suite(args.out, args.only)
     print(
         "| sequence | true step m | start | error median m / deg | error max m | "
@@ -101,7 +106,7 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|")
     for name in args.only:
-        r = probe(folders[name], args.frames, args.probe)
+        r = probe(folders[name], args.frames, args.probe, opts)
         for start in ("true", "previous"):
             e, s = r[start], r[f"sigma_{start}"]
             print(

@@ -111,6 +111,8 @@ OPTION_RANGES: dict[str, _Range] = {
     "voxel_factor": (0, False, None, False),
     "inplane_sigma": (0, False, None, False),
     "nonplanar_gain": (0, True, None, False),
+    "curvature_sigma": (0, False, None, False),
+    "quadric_reach": (0, True, None, False),
     "repeat_refine": (0, True, None, False),
     "repeat_fraction": (0, True, 1, True),
     "symmetry_max_ratio": (0, True, None, False),

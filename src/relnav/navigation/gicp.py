@@ -82,17 +82,82 @@ def _solve6(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - n
 
 
 @njit(cache=True)
+def _curved_offset(
+    e0: float, e1: float, e2: float, O: np.ndarray, n: np.ndarray, q: np.ndarray
+) -> tuple:  # pragma: no cover - numba
+    """Offset of a point from a curved map patch and its information (see :func:`_accumulate`):
+    ``(e', AᵀΩA (row-major 9), AᵀΩe', e'ᵀΩe')``."""
+    S00, S01, S02, S11, S12, S22 = q[4], q[5], q[6], q[7], q[8], q[9]
+    n0, n1, n2 = n[0], n[1], n[2]
+    # the tangential offset, clamped to the patch's reach (see quadric_surface)
+    en = n0 * e0 + n1 * e1 + n2 * e2
+    u0, u1, u2 = e0 - n0 * en, e1 - n1 * en, e2 - n2 * en
+    ut = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    f = q[10] / ut if ut > q[10] else 1.0
+    c0, c1, c2 = u0 * f, u1 * f, u2 * f
+    Se0 = S00 * c0 + S01 * c1 + S02 * c2
+    Se1 = S01 * c0 + S11 * c1 + S12 * c2
+    Se2 = S02 * c0 + S12 * c1 + S22 * c2
+    h = q[0] + q[1] * c0 + q[2] * c1 + q[3] * c2 + 0.5 * (c0 * Se0 + c1 * Se1 + c2 * Se2)
+    g0, g1, g2 = q[1] + Se0, q[2] + Se1, q[3] + Se2
+    if f < 1.0:
+        # beyond the reach the patch continues along its tangent plane at the rim; the
+        # rim point moves with the offset's direction, which adds to the gradient
+        # (r/|u|)(|u| − r) (I − ûûᵀ) S û
+        h += g0 * (u0 - c0) + g1 * (u1 - c1) + g2 * (u2 - c2)
+        a0, a1, a2 = u0 / ut, u1 / ut, u2 / ut
+        s0 = S00 * a0 + S01 * a1 + S02 * a2
+        s1 = S01 * a0 + S11 * a1 + S12 * a2
+        s2 = S02 * a0 + S12 * a1 + S22 * a2
+        sa = s0 * a0 + s1 * a1 + s2 * a2
+        k = f * (ut - q[10])
+        g0 += k * (s0 - sa * a0)
+        g1 += k * (s1 - sa * a1)
+        g2 += k * (s2 - sa * a2)
+    f0, f1, f2 = e0 - n0 * h, e1 - n1 * h, e2 - n2 * h
+    # A = I − n gᵀ: AᵀΩA = Ω − g vᵀ − v gᵀ + α g gᵀ and AᵀΩf = Ωf − g (v·f), v = Ωn, α = nᵀΩn
+    v0 = O[0, 0] * n0 + O[0, 1] * n1 + O[0, 2] * n2
+    v1 = O[1, 0] * n0 + O[1, 1] * n1 + O[1, 2] * n2
+    v2 = O[2, 0] * n0 + O[2, 1] * n1 + O[2, 2] * n2
+    al = n0 * v0 + n1 * v1 + n2 * v2
+    Of0 = O[0, 0] * f0 + O[0, 1] * f1 + O[0, 2] * f2
+    Of1 = O[1, 0] * f0 + O[1, 1] * f1 + O[1, 2] * f2
+    Of2 = O[2, 0] * f0 + O[2, 1] * f1 + O[2, 2] * f2
+    d2 = f0 * Of0 + f1 * Of1 + f2 * Of2
+    vf = v0 * f0 + v1 * f1 + v2 * f2
+    return (
+        f0, f1, f2,
+        O[0, 0] - 2.0 * g0 * v0 + al * g0 * g0,
+        O[0, 1] - g0 * v1 - v0 * g1 + al * g0 * g1,
+        O[0, 2] - g0 * v2 - v0 * g2 + al * g0 * g2,
+        O[1, 0] - g1 * v0 - v1 * g0 + al * g1 * g0,
+        O[1, 1] - 2.0 * g1 * v1 + al * g1 * g1,
+        O[1, 2] - g1 * v2 - v1 * g2 + al * g1 * g2,
+        O[2, 0] - g2 * v0 - v2 * g0 + al * g2 * g0,
+        O[2, 1] - g2 * v1 - v2 * g1 + al * g2 * g1,
+        O[2, 2] - 2.0 * g2 * v2 + al * g2 * g2,
+        Of0 - g0 * vf, Of1 - g1 * vf, Of2 - g2 * vf, d2,
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def _accumulate(
     X: np.ndarray,
     idx: np.ndarray,
     M: np.ndarray,
     Om: np.ndarray,
     c2: float,
+    Nrm: np.ndarray,
+    Qd: np.ndarray,
+    use_quad: bool,
 ) -> tuple[np.ndarray, np.ndarray, int, float, float, np.ndarray]:  # pragma: no cover - numba
     """Weighted normal equations at the current correspondences.
 
     Returns ``(H, g, n_pairs, Σw, Σw·d², d2)`` with ``d2`` the squared Mahalanobis distance of
-    each point (``-1`` for points without a neighbour).
+    each point (``-1`` for points without a neighbour). With ``use_quad`` the offset from the
+    map point is measured from its curved patch (``Nrm``, ``Qd``:
+    :attr:`relnav.navigation.voxel_map.VoxelMap.surface`): ``e' = e − n h(e)`` with Jacobian
+    ``A = I − n ∇h(e)ᵀ``, so ``Ω`` becomes ``AᵀΩA`` and ``Ωe`` becomes ``AᵀΩe'``.
     """
     H = np.zeros((6, 6))
     g = np.zeros(6)
@@ -113,10 +178,15 @@ def _accumulate(
         O00, O01, O02 = Om[j, 0, 0], Om[j, 0, 1], Om[j, 0, 2]
         O10, O11, O12 = Om[j, 1, 0], Om[j, 1, 1], Om[j, 1, 2]
         O20, O21, O22 = Om[j, 2, 0], Om[j, 2, 1], Om[j, 2, 2]
-        Oe0 = O00 * e0 + O01 * e1 + O02 * e2
-        Oe1 = O10 * e0 + O11 * e1 + O12 * e2
-        Oe2 = O20 * e0 + O21 * e1 + O22 * e2
-        d2 = e0 * Oe0 + e1 * Oe1 + e2 * Oe2
+        if use_quad and Qd[j, 10] > 0.0:  # a plane patch (reach 0) takes the plane's path
+            e0, e1, e2, O00, O01, O02, O10, O11, O12, O20, O21, O22, Oe0, Oe1, Oe2, d2 = (
+                _curved_offset(e0, e1, e2, Om[j], Nrm[j], Qd[j])
+            )
+        else:
+            Oe0 = O00 * e0 + O01 * e1 + O02 * e2
+            Oe1 = O10 * e0 + O11 * e1 + O12 * e2
+            Oe2 = O20 * e0 + O21 * e1 + O22 * e2
+            d2 = e0 * Oe0 + e1 * Oe1 + e2 * Oe2
         d2_out[i] = d2
         q = c2 / (c2 + d2)
         w = q * q
@@ -290,6 +360,9 @@ def _solve_loop(
     max_iter: int,
     tol_t: float,
     tol_r: float,
+    Nrm: np.ndarray,
+    Qd: np.ndarray,
+    use_quad: bool,
 ) -> tuple:  # pragma: no cover - numba
     T = T0.copy()
     scale = max(c0, c)
@@ -298,7 +371,7 @@ def _solve_loop(
     for it in range(max_iter):
         iters = it + 1
         X, idx = _nearest(P, T, trees, gate, cache)
-        H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale)
+        H, g, _, _, _, _ = _accumulate(X, idx, M, Om, scale * scale, Nrm, Qd, use_quad)
         xi = _prior_twist(T, T_pred)
         A = H + Lam
         b = np.zeros(6)
@@ -322,7 +395,7 @@ def _solve_loop(
         if annealed and dt < tol_t and dr < tol_r:
             break
     X, idx = _nearest(P, T, trees, gate, cache)
-    H, g, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c * c)
+    H, g, n_pairs, sw, swd, d2 = _accumulate(X, idx, M, Om, c * c, Nrm, Qd, use_quad)
     return T, H, n_pairs, iters, sw, swd, d2, idx
 
 
@@ -341,6 +414,7 @@ def solve_scan_to_map(
     tol_r: float,
     c0: float = 100.0,
     decay: float = 0.6,
+    surface: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> ScanToMapFit:
     """Register the scan ``P`` (sensor frame, ``(N, 3)``) onto the map from ``T0``.
 
@@ -368,7 +442,16 @@ def solve_scan_to_map(
         Graduated non-convexity: the kernel scale starts at ``c0`` and shrinks by ``decay`` per
         iteration down to ``c``, so that a prediction far from the truth still converges (a
         tight kernel from the start locks onto the nearest wrong pairs).
+    surface : (normals (K, 3), quadric (K, 11)), optional
+        Curved map patches (:attr:`relnav.navigation.voxel_map.VoxelMap.surface`); ``None``:
+        the plane through each map point.
     """
+    if surface is None:
+        Nrm, Qd, use_quad = np.zeros((1, 3)), np.zeros((1, 11)), False
+    else:
+        Nrm = np.ascontiguousarray(surface[0], dtype=np.float64)
+        Qd = np.ascontiguousarray(surface[1], dtype=np.float64)
+        use_quad = True
     T, H, n_pairs, iters, sw, swd, d2, idx = _solve_loop(
         np.ascontiguousarray(P, dtype=np.float64),
         trees,
@@ -384,6 +467,9 @@ def solve_scan_to_map(
         int(max_iter),
         float(tol_t),
         float(tol_r),
+        Nrm,
+        Qd,
+        use_quad,
     )
     return ScanToMapFit(T, H, int(n_pairs), int(iters), float(sw), float(swd), d2, idx)
 

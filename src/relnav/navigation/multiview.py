@@ -604,6 +604,7 @@ def refine_window(nav: Navigator) -> None:
                 c.tolerance * v / f.rng,
                 c0=float(c.kernel_start),
                 decay=float(c.kernel_decay),
+                surface=m.surface,
             )
             overlap = float(np.count_nonzero(fit.d2 >= 0)) / max(len(f.P), 1)
             if not (

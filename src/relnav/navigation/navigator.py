@@ -413,6 +413,9 @@ class Navigator:
             inplane_sigma=c.inplane_sigma * s0,
             k_neighbors=c.k_neighbors,
             nonplanar_gain=c.nonplanar_gain,
+            surface=c.surface,
+            curvature_sigma=c.curvature_sigma,
+            quadric_reach=c.quadric_reach * s0,
         )
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
@@ -432,6 +435,9 @@ class Navigator:
                     "inplane_sigma": c.inplane_sigma * s0,
                     "k_neighbors": c.k_neighbors,
                     "nonplanar_gain": c.nonplanar_gain,
+                    "surface": c.surface,
+                    "curvature_sigma": c.curvature_sigma,
+                    "quadric_reach": c.quadric_reach * s0,
                 },
                 every=c.keyframe_every,
                 window=c.keyframe_window,
@@ -747,6 +753,7 @@ class Navigator:
             c.tolerance * v / max(rng, 1.0),
             c0=float(c.kernel_start) * kernel_scale,
             decay=float(c.kernel_decay),
+            surface=self.map.surface,
         )
 
     def _solve(

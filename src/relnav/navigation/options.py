@@ -309,6 +309,29 @@ class NavigatorConfig:
         wrong either way). Hence off by default
         (γ = 10: iridium 1.65/0, orion 3.92/13, aura 0.94, envisat 1.15; γ = 30: iridium
         4.67/0, orion 3.90/0, aura 0.91, envisat 1.63).
+    surface : {"plane", "quadric"}
+        The map patches' shape in the registration: the plane through each map point
+        (default), or the second-order surface fitted to its ``k_neighbors``
+        (:func:`relnav.navigation.voxel_map.quadric_surface`), which removes the pull of a
+        curved surface's sample positions (a scan point between two samples is off the
+        plane of either by ``d²/2R``). **[measured]** (``docs/navigator.md``, "Curved map
+        patches": ``python benchmarks/nav_option_sweep.py --out bench/nav -O
+        surface=quadric``, 6 neutral perturbations per sequence) Median APE better on 11 of
+        the 17 suite sequences (iridium-helical-64 17.8 → 4.7 m, voyager-ellipse-128 1.19 →
+        0.70 m, eros-ellipse-64 0.46 → 0.27 m), worse on 3 (envisat-tumble-64 0.92 → 1.59 m);
+        but the suite's wrong steps per run stay 50–84 (50–93 with planes), fewer of them are
+        flagged (0–4 against 6–9), and the time per frame grows 5–30 %, which takes the
+        presets' whole run to 3.1× KISS-ICP's. Hence off by default.
+    curvature_sigma : float
+        Prior 1σ of a quadric patch's curvatures, 1/m (0.3: radii of a few metres and more
+        are curvatures, tighter bends of a sparse map are mostly noise).
+    quadric_reach : float
+        A patch whose ``k_neighbors`` reach farther than this (multiples of ``s₀``) stays a
+        plane with ``surface="quadric"``: on a sparse map (the first scans, a thin part) the
+        neighbours are too far apart for their curvature to be the surface's. **[measured]**
+        Without it the held-out voyager-helical-64 goes 14.8 → 73.3 m and sim-orion-resample
+        31.1 → 73.3 m; it was added after seeing that held-out failure. 1.8 s₀ chosen on the
+        suite's median APE among 1.2, 1.8 and 2.4 s₀ (``docs/navigator.md``).
     k_neighbors : int
         Map points per patch (normal estimation).
     symmetry_max_ratio : float
@@ -408,6 +431,9 @@ class NavigatorConfig:
     voxel_factor: float = 0.3
     inplane_sigma: float = 3.0
     nonplanar_gain: float = 0.0
+    surface: Literal["plane", "quadric"] = "plane"
+    curvature_sigma: float = 0.3
+    quadric_reach: float = 1.8
     symmetry_max_ratio: float = 0.0
     symmetry_min_arc_deg: float = 180.0
     symmetry_max_axial: float = 0.6

@@ -560,6 +560,7 @@ def register_submap(
         tolerance * v / max(rng, 1.0),
         c0=float(kernel_start),
         decay=float(kernel_decay),
+        surface=target.surface,
     )
     n = max(len(P), 1)
     has = fit.d2 >= 0

@@ -7,7 +7,10 @@ density-capped accumulation of all accepted scans: much denser than one sparse s
 
 Each map point carries a plane-like information matrix (:func:`plane_information`) from its
 ``k`` nearest map neighbours: strong along the local normal, weak along the surface, so that a scan
-point is pulled onto the surface, not onto the sample positions of earlier scans.
+point is pulled onto the surface, not onto the sample positions of earlier scans. With
+``surface="quadric"`` each point also carries the second-order surface of its neighbours
+(:func:`quadric_surface`, :attr:`VoxelMap.surface`), from which the registration measures a scan
+point's offset instead of from the plane (:func:`relnav.navigation.gicp.solve_scan_to_map`).
 
 **Search structure.** A KD-tree over all points is rebuilt only when the points added since the
 last rebuild exceed a fraction of the map (``rebuild_fraction``); the recent points have a small
@@ -23,16 +26,18 @@ The map is bounded: above ``max_voxels`` the least recently seen voxels are drop
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
 from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
+from relnav.navigation.gicp import _solve6
 
 log = logging.getLogger(__name__)
 
-__all__ = ["VoxelMap", "even_subset", "plane_information"]
+__all__ = ["VoxelMap", "even_subset", "plane_information", "quadric_surface"]
 
 
 @njit(cache=True)
@@ -155,6 +160,145 @@ def _map_knn(
     return _merge_knn(d_a, i_a, d_b, i_b, k)
 
 
+@njit(cache=True)
+def _quadric_kernel(
+    M: np.ndarray,
+    centers: np.ndarray,
+    nb: np.ndarray,
+    nrm: np.ndarray,
+    noise_var: float,
+    curv_sigma: float,
+    max_reach: float,
+) -> np.ndarray:  # pragma: no cover - numba
+    """Second-order surface of each neighbourhood about its centre (see :func:`quadric_surface`)."""
+    q = nb.shape[0]
+    out = np.zeros((q, 11))
+    A = np.zeros((6, 6))
+    b = np.zeros(6)
+    row = np.zeros(6)
+    for i in range(q):
+        n0, n1, n2 = nrm[i, 0], nrm[i, 1], nrm[i, 2]
+        # a tangent basis (t1, t2) orthonormal to n
+        if abs(n0) < 0.9:
+            a0, a1, a2 = 0.0, -n2, n1  # e_x × n
+        else:
+            a0, a1, a2 = n2, 0.0, -n0  # e_y × n
+        na = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        t10, t11, t12 = a0 / na, a1 / na, a2 / na
+        t20 = n1 * t12 - n2 * t11
+        t21 = n2 * t10 - n0 * t12
+        t22 = n0 * t11 - n1 * t10
+        for r in range(6):
+            b[r] = 0.0
+            for cc in range(6):
+                A[r, cc] = 0.0
+        m = 0
+        reach = 0.0
+        for j in range(nb.shape[1]):
+            k = nb[i, j]
+            if k < 0:
+                continue
+            d0 = M[k, 0] - centers[i, 0]
+            d1 = M[k, 1] - centers[i, 1]
+            d2 = M[k, 2] - centers[i, 2]
+            u = t10 * d0 + t11 * d1 + t12 * d2
+            v = t20 * d0 + t21 * d1 + t22 * d2
+            h = n0 * d0 + n1 * d1 + n2 * d2
+            reach = max(reach, math.sqrt(u * u + v * v))
+            row[0], row[1], row[2] = 1.0, u, v
+            row[3], row[4], row[5] = 0.5 * u * u, u * v, 0.5 * v * v
+            for r in range(6):
+                b[r] += row[r] * h / noise_var
+                for cc in range(6):
+                    A[r, cc] += row[r] * row[cc] / noise_var
+            m += 1
+        if m < 3 or reach > max_reach:
+            continue  # a plane
+        # priors: offset ~ N(0, σ_n²), slope ~ N(0, 1), curvature ~ N(0, curv_sigma²)
+        A[0, 0] += 1.0 / noise_var
+        A[1, 1] += 1.0
+        A[2, 2] += 1.0
+        for r in range(3, 6):
+            A[r, r] += 1.0 / (curv_sigma * curv_sigma)
+        c = _solve6(A, b)
+        t1 = (t10, t11, t12)
+        t2 = (t20, t21, t22)
+        out[i, 0] = c[0]
+        out[i, 10] = reach
+        for a in range(3):
+            out[i, 1 + a] = c[1] * t1[a] + c[2] * t2[a]
+        s = 4
+        for a in range(3):
+            for bb in range(a, 3):
+                out[i, s] = (
+                    c[3] * t1[a] * t1[bb]
+                    + c[4] * (t1[a] * t2[bb] + t2[a] * t1[bb])
+                    + c[5] * t2[a] * t2[bb]
+                )
+                s += 1
+    return out
+
+
+def quadric_surface(
+    points: np.ndarray,
+    centers: np.ndarray,
+    neighbors: np.ndarray,
+    normals: np.ndarray,
+    noise_floor: float,
+    curvature_sigma: float = 0.3,
+    max_reach: float = np.inf,
+) -> np.ndarray:
+    """Second-order surface of each neighbourhood about its centre.
+
+    In the tangent frame ``(t₁, t₂, n)`` of ``centers[i]`` (``n``: its patch normal) the
+    heights ``h = n·(p − c)`` of the neighbours are fitted by
+    ``h = c₀ + g·d + ½ dᵀ S d`` (``d``: the tangential offset), least squares with Gaussian
+    priors ``c₀ ~ N(0, σ_n²)``, slopes ``~ N(0, 1)`` and curvatures ``~ N(0, κ_σ²)``.
+    **[interpretation]** A plane through a map sample is exact only at the sample: on a curved
+    surface a scan point between samples is off the plane by ``d²/2R``, so a point-to-plane
+    cost is lowest where the scan repeats the map's sample positions ("no motion" along a
+    surface that slides along itself, such as a body of revolution turning about its axis).
+    The curved patch removes that pull. A neighbourhood that reaches farther than
+    ``max_reach`` (a sparse map: one scan, a thin part) stays a plane (a zero row): there the
+    neighbours are too far apart for their curvature to be the surface's.
+
+    Parameters
+    ----------
+    points : (M, 3) float64
+        Map points, m.
+    centers : (Q, 3) float64
+        Patch centres (the map points whose patches these are), m.
+    neighbors : (Q, k) int
+        Indices of each neighbourhood in ``points`` (``-1`` = none).
+    normals : (Q, 3) float64
+        Unit patch normals.
+    noise_floor : float
+        ``σ_n``, m.
+    curvature_sigma : float
+        ``κ_σ``, 1/m.
+    max_reach : float
+        Largest tangential distance of a neighbour for a curved patch, m.
+
+    Returns
+    -------
+    (Q, 11) float64
+        ``[c₀, g (3, target frame), S (upper triangle: xx, xy, xz, yy, yz, zz), r]``; ``g``
+        and ``S`` lie in the tangent plane, so ``h(e) = c₀ + g·e + ½ eᵀ S e`` for any offset
+        ``e``; ``r`` (m) is the largest tangential distance of a neighbour: the fit holds
+        within it, and an offset beyond is evaluated at ``r`` in its direction (the surface
+        continues along its tangent there, not along the parabola).
+    """
+    return _quadric_kernel(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(centers, dtype=np.float64),
+        np.ascontiguousarray(neighbors, dtype=np.int64),
+        np.ascontiguousarray(normals, dtype=np.float64),
+        float(noise_floor) ** 2,
+        float(curvature_sigma),
+        float(max_reach),
+    )
+
+
 def plane_information(
     points: np.ndarray,
     neighbors: np.ndarray,
@@ -239,6 +383,13 @@ class VoxelMap:
     nonplanar_gain : float
         Non-planarity gain ``γ`` of the patches' information (:func:`plane_information`; 0 =
         off).
+    surface : {"plane", "quadric"}
+        The patch model used by the registration: the plane through each map point, or the
+        second-order surface of its neighbourhood (:func:`quadric_surface`, :attr:`surface`).
+    curvature_sigma : float
+        Prior 1σ of a quadric patch's curvatures, 1/m.
+    quadric_reach : float
+        A patch whose neighbours reach farther than this (m) stays a plane.
     """
 
     def __init__(
@@ -252,6 +403,9 @@ class VoxelMap:
         k_neighbors: int = 10,
         rebuild_fraction: float = 0.1,
         nonplanar_gain: float = 0.0,
+        surface: str = "plane",
+        curvature_sigma: float = 0.3,
+        quadric_reach: float = np.inf,
     ) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
@@ -265,6 +419,11 @@ class VoxelMap:
         if not (np.isfinite(nonplanar_gain) and nonplanar_gain >= 0):
             raise ValueError(f"nonplanar_gain must be a number >= 0, got {nonplanar_gain}")
         self.nonplanar_gain = float(nonplanar_gain)
+        if surface not in ("plane", "quadric"):
+            raise ValueError(f"surface must be 'plane' or 'quadric', got {surface!r}")
+        self.surface_model = surface
+        self.curvature_sigma = float(curvature_sigma)
+        self.quadric_reach = float(quadric_reach)
         # voxel index: packed cell codes, sorted, and the storage slot of each
         self._codes = np.zeros(0, dtype=np.int64)
         self._code_slots = np.zeros(0, dtype=np.int64)
@@ -275,6 +434,7 @@ class VoxelMap:
         self._keys = np.zeros((cap, 3), dtype=np.int64)
         self._info_all = np.zeros((cap, 3, 3))
         self._normal_all = np.zeros((cap, 3))
+        self._quad_all = np.zeros((cap, 11))
         self.n = 0
         self._touched: set[int] = set()
         self._n_main = 0  # points [0, n_main) are in the main trees
@@ -348,6 +508,7 @@ class VoxelMap:
             self._keys = np.resize(self._keys, (cap, 3))
             self._info_all = np.resize(self._info_all, (cap, 3, 3))
             self._normal_all = np.resize(self._normal_all, (cap, 3))
+            self._quad_all = np.resize(self._quad_all, (cap, 11))
         i = np.arange(self.n, self.n + m, dtype=np.int64)
         self._w[i] = 0.0
         self._s1[i] = 0.0
@@ -357,7 +518,7 @@ class VoxelMap:
 
     def _evict(self) -> None:
         keep = np.sort(np.argsort(-self._seen[: self.n], kind="stable")[: self.max_voxels])
-        for name in ("_w", "_s1", "_seen", "_keys", "_info_all", "_normal_all"):
+        for name in ("_w", "_s1", "_seen", "_keys", "_info_all", "_normal_all", "_quad_all"):
             setattr(self, name, getattr(self, name)[keep].copy())
         self.n = len(keep)
         codes = _pack(self._keys[: self.n])
@@ -397,6 +558,15 @@ class VoxelMap:
         return self._normal_all[: self.n]
 
     @property
+    def surface(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(normals (M, 3), quadric (M, 11))`` of the map points when the patch model is
+        ``"quadric"`` (:func:`quadric_surface`), else ``None`` (plane patches)."""
+        if self.surface_model != "quadric":
+            return None
+        self._refresh()
+        return self._normal_all[: self.n], self._quad_all[: self.n]
+
+    @property
     def search_trees(self) -> tuple[np.ndarray, ...]:
         """Numba KD-tree arrays for nearest-map-point queries.
 
@@ -430,6 +600,16 @@ class VoxelMap:
             )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
+            if self.surface_model == "quadric":
+                self._quad_all[touched] = quadric_surface(
+                    mu,
+                    mu[touched],
+                    nb,
+                    nrm,
+                    self.noise_floor,
+                    self.curvature_sigma,
+                    self.quadric_reach,
+                )
         self._touched = set()
         self._mean = mu
         self._dirty = False
