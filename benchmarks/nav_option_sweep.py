@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, paper, run_method, simulate_suite, suite
+from nav_suite import run_method, sequence_names, simulate_suite
 from nav_weak_directions import PERTURBATIONS
 
 KEYS = ("ape", "rpe_t", "rpe_r", "wrong", "wrong_flagged", "right_flagged", "ms", "wall_s")
@@ -60,8 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if not 1 <= a.perturb <= len(PERTURBATIONS):
         p.error(f"--perturb must be 1..{len(PERTURBATIONS)}")
-    pool = holdout() if a.holdout else {**suite(), **paper()}
-    names = [n for n in pool if not a.only or any(s in n for s in a.only.split(","))]
+    names = sequence_names(a.holdout, a.only)
     folders = simulate_suite(a.out, names)
     opts = dict(o.split("=", 1) for o in a.options)
     label = " ".join(a.options) or "defaults"

@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, paper, simulate_suite, step_errors, suite
+from nav_suite import sequence_names, simulate_suite, step_errors
 
 OFFSETS = (-1.0, -0.5, 0.5, 1.0)  # metres at the sensor along the weakest direction
 CHI2_1_95 = 3.841
@@ -129,8 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
     p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
     a = p.parse_args(argv)
-    pool = holdout() if a.holdout else {**suite(), **paper()}
-    names = [n for n in pool if not a.only or any(s in n for s in a.only.split(","))]
+    names = sequence_names(a.holdout, a.only)
     opts = dict(o.split("=", 1) for o in a.options)
     print(
         "| sequence | steps | wrong | undetermined: wrong | undetermined: right | "

@@ -232,6 +232,13 @@ def write_configs(folder: Path) -> list[Path]:
     return written
 
 
+def sequence_names(held_out: bool = False, only: str = "") -> list[str]:
+    """The suite's sequences with the paper presets, or the held-out ones; ``only``: keep the
+    names containing one of its comma-separated substrings."""
+    pool = holdout() if held_out else {**suite(), **paper()}
+    return [n for n in pool if not only or any(s in n for s in only.split(","))]
+
+
 def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
     """Simulate (once) every named sequence into ``out/sequences``; returns their folders."""
     from relnav.sim.scenario import simulate
@@ -340,8 +347,7 @@ def main(argv: list[str] | None = None) -> int:
         for path in write_configs(a.write_configs):
             print(path)
         return 0
-    pool = holdout() if a.holdout else {**suite(), **paper()}
-    names = [n for n in pool if not a.only or any(s in n for s in a.only.split(","))]
+    names = sequence_names(a.holdout, a.only)
     folders = simulate_suite(a.out, names)
     methods = [m for m in a.methods.split(",") if m]
     results: dict[str, dict[str, Any]] = {}
