@@ -9,10 +9,14 @@ import math
 import numpy as np
 import pytest
 
+from nav_scenarios import flash_orbit
 from relnav.geometry.se3 import exp_se3, log_se3
+from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.gicp import _accumulate, left_information, solve_scan_to_map
 from relnav.navigation.voxel_map import quadric_surface
+from relnav.odometry import run_sequence
+from relnav.sim.scenario import simulate
 
 
 def _cylinder_patch(radius: float, rng: np.random.Generator, n: int = 12) -> np.ndarray:
@@ -173,3 +177,17 @@ def test_quadric_option_reaches_the_map(rng):
     normals, quad = m.surface  # type: ignore[misc]
     assert normals.shape == (50, 3) and quad.shape == (50, 11)
     assert VoxelMap(0.1).surface is None
+
+
+def test_quadric_navigator_tracks_a_short_orbit_with_its_revisit_maps(tmp_path):
+    """End to end on 12 frames of a sparse asteroid orbit (3.5 m steps): with curved patches,
+    and the pose graph's keyframe maps built with them, every step is accepted and every pose
+    is within 0.2 m of the truth (measured 0.11 m; 0.25 m with planes on this run)."""
+    simulate(flash_orbit("nav-quadric", max_frames=12), tmp_path / "seq")
+    seq = ScanSequence(tmp_path / "seq")
+    run = run_sequence(seq, "relnav", surface="quadric", loop_closure=True, keyframe_every=3)
+    assert all(s.status in ("ok", "first") for s in run.steps)
+    err = [
+        np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(run.poses, seq.gt_poses, strict=True)
+    ]
+    assert max(err) < 0.2, err
