@@ -177,6 +177,9 @@ def test_quadric_option_reaches_the_map(rng):
     normals, quad = m.surface  # type: ignore[misc]
     assert normals.shape == (50, 3) and quad.shape == (50, 11)
     assert VoxelMap(0.1).surface is None
+    for bad in ({"surface": "cubic"}, {"curvature_sigma": 0.0}, {"quadric_reach": float("nan")}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            VoxelMap(0.1, **bad)
 
 
 def test_quadric_navigator_tracks_a_short_orbit_with_its_revisit_maps(tmp_path):

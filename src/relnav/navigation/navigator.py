@@ -402,20 +402,26 @@ class Navigator:
         mv.window_step(self, None, t, out)
         return self._observe_loops(None, out)
 
+    def _map_options(self) -> dict[str, Any]:
+        """The navigator's patch and weighting parameters of a :class:`VoxelMap` (metres from
+        the multiples of ``s₀``), shared by its map and the pose graph's keyframe maps."""
+        c, s0 = self.config, self.spacing0
+        return {
+            "max_weight": c.max_voxel_weight,
+            "noise_floor": c.noise_floor * s0,
+            "inplane_sigma": c.inplane_sigma * s0,
+            "k_neighbors": c.k_neighbors,
+            "nonplanar_gain": c.nonplanar_gain,
+            "surface": c.surface,
+            "curvature_sigma": c.curvature_sigma,
+            "quadric_reach": c.quadric_reach * s0,
+        }
+
     def _new_map(self) -> VoxelMap:
         """An empty map with the navigator's parameters (voxel ``voxel_factor · s₀``)."""
-        c, s0 = self.config, self.spacing0
+        c = self.config
         return VoxelMap(
-            c.voxel_factor * s0,
-            max_weight=c.max_voxel_weight,
-            max_voxels=c.max_voxels,
-            noise_floor=c.noise_floor * s0,
-            inplane_sigma=c.inplane_sigma * s0,
-            k_neighbors=c.k_neighbors,
-            nonplanar_gain=c.nonplanar_gain,
-            surface=c.surface,
-            curvature_sigma=c.curvature_sigma,
-            quadric_reach=c.quadric_reach * s0,
+            c.voxel_factor * self.spacing0, max_voxels=c.max_voxels, **self._map_options()
         )
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
@@ -426,19 +432,9 @@ class Navigator:
             return out
         ts = time.perf_counter()
         if self.loop_closer is None:
-            s0 = self.spacing0
             self.loop_closer = LoopCloser(
                 self.map.voxel_size,
-                {
-                    "max_weight": c.max_voxel_weight,
-                    "noise_floor": c.noise_floor * s0,
-                    "inplane_sigma": c.inplane_sigma * s0,
-                    "k_neighbors": c.k_neighbors,
-                    "nonplanar_gain": c.nonplanar_gain,
-                    "surface": c.surface,
-                    "curvature_sigma": c.curvature_sigma,
-                    "quadric_reach": c.quadric_reach * s0,
-                },
+                self._map_options(),
                 every=c.keyframe_every,
                 window=c.keyframe_window,
                 min_separation=c.loop_min_separation,

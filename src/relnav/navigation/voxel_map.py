@@ -421,6 +421,10 @@ class VoxelMap:
         self.nonplanar_gain = float(nonplanar_gain)
         if surface not in ("plane", "quadric"):
             raise ValueError(f"surface must be 'plane' or 'quadric', got {surface!r}")
+        if not (np.isfinite(curvature_sigma) and curvature_sigma > 0):
+            raise ValueError(f"curvature_sigma must be a number > 0, got {curvature_sigma}")
+        if not quadric_reach >= 0:
+            raise ValueError(f"quadric_reach must be >= 0 metres, got {quadric_reach}")
         self.surface_model = surface
         self.curvature_sigma = float(curvature_sigma)
         self.quadric_reach = float(quadric_reach)
