@@ -330,8 +330,8 @@ class NavigatorConfig:
         plane with ``surface="quadric"``: on a sparse map (the first scans, a thin part) the
         neighbours are too far apart for their curvature to be the surface's. **[measured]**
         Without it the held-out voyager-helical-64 goes 14.8 → 73.3 m and sim-orion-resample
-        31.1 → 73.3 m; it was added after seeing that held-out failure. 1.8 s₀ chosen on the
-        suite's median APE among 1.2, 1.8 and 2.4 s₀ (``docs/navigator.md``).
+        31.1 → 73.3 m; it was added after seeing that held-out failure. 1.8 s₀: the
+        compromise on the suite's median APE among 1.2, 1.8 and 2.4 s₀ (``docs/navigator.md``).
     k_neighbors : int
         Map points per patch (normal estimation).
     symmetry_max_ratio : float
