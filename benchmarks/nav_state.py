@@ -49,7 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, paper, suite
+from nav_suite import holdout, sequence_names, suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -132,10 +132,9 @@ def report_compare(out: Path, which: str, opts: dict[str, str], state: dict) -> 
     if state:
         pair = [{}, dict(state)]
 
-    pool = holdout() if which == "holdout" else {**suite(), **paper()}
     print("| sequence | position m | velocity mm/s | attitude ° | rate median / max °/s | NEES |")
     print("|---|---|---|---|---|---|")
-    for name, folder in simulate_suite(out, list(pool)).items():
+    for name, folder in simulate_suite(out, sequence_names(which == "holdout")).items():
         a, b = (state_errors(r) for r in track(folder, opts, variants=pair))
         print(
             f"| {name} | {a[0]:.3f} → {b[0]:.3f} | {a[1]:.2f} → {b[1]:.2f} | {a[2]:.2f} → "
