@@ -306,11 +306,19 @@ def test_step_covariance_is_consistent_with_the_step_errors():
     assert lo < np.mean(nees) < hi, (np.mean(nees), lo, hi)
 
 
-def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
+@pytest.fixture(scope="module")
+def monitored_runs(orbit_seq):
+    """12 frames (the multi-view start included) without integrity monitoring and with an alert
+    limit below every protection level."""
+    free = run_sequence(orbit_seq, "relnav", max_frames=12)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=12, alert_limit_t=1e-6)
+    return free, tight
+
+
+def test_alert_limit_flags_steps_without_changing_poses(monitored_runs):
     """Integrity monitoring only labels steps: the poses are those of the unmonitored run, every
     step records its 1σ, and a limit below every protection level flags every registered step."""
-    free = run_sequence(orbit_seq, "relnav", max_frames=12)  # the multi-view start included
-    tight = run_sequence(orbit_seq, "relnav", max_frames=12, alert_limit_t=1e-6)
+    free, tight = monitored_runs
     assert free.steps[-1].result.info.get("merged")
     np.testing.assert_array_equal(free.poses, tight.poses)
     assert all(s.result.info["step_sigma_t"] > 0 for s in free.steps[1:])
@@ -320,15 +328,14 @@ def test_alert_limit_flags_steps_without_changing_poses(orbit_seq):
     assert not any(s.used_prior for s in tight.steps[1:])
 
 
-def test_relabelled_merged_frames_still_observe_the_relative_state(orbit_seq):
+def test_relabelled_merged_frames_still_observe_the_relative_state(monitored_runs):
     """A step relabelled ``degenerate`` by an alert limit went into the map all the same
     (``in_map``): the relative state takes it as an observation, so the state is that of the
     unmonitored run."""
     from relnav.navigation.options import in_map
     from relnav.navigation.state import StateRecord, relative_state
 
-    free = run_sequence(orbit_seq, "relnav", max_frames=12)
-    tight = run_sequence(orbit_seq, "relnav", max_frames=12, alert_limit_t=1e-6)
+    free, tight = monitored_runs
     assert all(in_map(s) and StateRecord.from_step(s).merged for s in tight.steps)
     a, b = relative_state(free), relative_state(tight)
     np.testing.assert_allclose(b.position, a.position)
