@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import run_method, sequence_names, simulate_suite
+from nav_suite import add_sequence_arguments, run_method, sequence_names, simulate_suite
 from nav_weak_directions import PERTURBATIONS
 
 KEYS = ("ape", "rpe_t", "rpe_r", "wrong", "wrong_flagged", "right_flagged", "ms", "wall_s")
@@ -51,10 +51,7 @@ def _cell(runs: list[dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--out", type=Path, default=Path("bench/nav"))
-    p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
-    p.add_argument("--holdout", action="store_true", help="the held-out sequences")
-    p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
+    add_sequence_arguments(p)
     p.add_argument("--perturb", type=int, default=6, help="runs per sequence (1 = unperturbed)")
     p.add_argument("--json", type=Path, default=None)
     a = p.parse_args(argv)

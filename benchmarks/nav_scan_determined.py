@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import sequence_names, simulate_suite, step_errors
+from nav_suite import add_sequence_arguments, sequence_names, simulate_suite, step_errors
 
 OFFSETS = (-1.0, -0.5, 0.5, 1.0)  # metres at the sensor along the weakest direction
 CHI2_1_95 = 3.841
@@ -124,10 +124,7 @@ def _mean(x: np.ndarray) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--out", type=Path, default=Path("bench/nav"))
-    p.add_argument("--holdout", action="store_true", help="the held-out sequences instead")
-    p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
-    p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
+    add_sequence_arguments(p)
     a = p.parse_args(argv)
     names = sequence_names(a.holdout, a.only)
     opts = dict(o.split("=", 1) for o in a.options)

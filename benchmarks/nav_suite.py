@@ -239,6 +239,20 @@ def sequence_names(held_out: bool = False, only: str = "") -> list[str]:
     return [n for n in pool if not only or any(s in n for s in only.split(","))]
 
 
+def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
+    """The navigation benchmarks' common arguments: ``--out`` (where the sequences are
+    simulated), ``--only`` and ``--holdout`` (:func:`sequence_names`) and ``-O`` (relnav's
+    options, ``key=value``, repeatable; ``dest="options"``)."""
+    p.add_argument("--out", type=Path, default=Path("bench/nav"))
+    p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
+    p.add_argument(
+        "--holdout", action="store_true", help="the held-out sequences instead of the suite"
+    )
+    p.add_argument(
+        "-O", dest="options", action="append", default=[], help="relnav option key=value"
+    )
+
+
 def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
     """Simulate (once) every named sequence into ``out/sequences``; returns their folders."""
     from relnav.sim.scenario import simulate
@@ -331,17 +345,10 @@ def markdown_table(results: dict[str, dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--out", type=Path, default=Path("bench/nav"))
-    p.add_argument("--only", default="", help="comma-separated substrings of sequence names")
+    add_sequence_arguments(p)
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS))
     p.add_argument("--json", type=Path, default=None)
-    p.add_argument(
-        "--holdout", action="store_true", help="the held-out sequences instead of the suite"
-    )
     p.add_argument("--write-configs", type=Path, default=None, help="write scenario YAMLs")
-    p.add_argument(
-        "-O", dest="options", action="append", default=[], help="relnav option key=value"
-    )
     a = p.parse_args(argv)
     if a.write_configs:
         for path in write_configs(a.write_configs):
