@@ -8,12 +8,14 @@ iridium-helical-64 and orion-inclined-64) runs ``relnav`` and, for every wrong s
 evaluated (smoothed) trajectory (> 0.5 m or 5°), takes the step's error as a body-frame twist
 ``[ρ, φ]`` with ``φ`` scaled by the scan's RMS radius (its lever arm) and prints the share of its
 squared norm along the weakest eigen-direction of the scan's information (same frame and scaling),
-the error's rotation axis in the target frame, and the online step's NEES against its own step
-covariance (6 dof). It also prints the median, over all frames, of the scan's information along
-that weakest direction divided by the motion prior's (``> 1``: the scan, not the model, decides
-that direction). With ``--perturb N`` it then runs ``N`` neutral perturbations of the solver
-(``kernel``, ``kernel_decay``, ``max_iter``) and prints their APE and wrong steps with the
-medians: on sparse scans a single run is one draw. The ground truth is used for scoring only.
+the error's rotation axis in the target frame, the step's rotation in the truth and in the
+estimate (the rotation part of the left twist ``log(T_k T_{k-1}⁻¹)``, target frame, degrees), and
+the online step's NEES against its own step covariance (6 dof). It also prints the median, over
+all frames, of the scan's information along that weakest direction divided by the motion prior's
+(``> 1``: the scan, not the model, decides that direction). With ``--perturb N`` it then runs
+``N`` neutral perturbations of the solver (``kernel``, ``kernel_decay``, ``max_iter``) and prints
+their APE and wrong steps with the medians: on sparse scans a single run is one draw. The ground
+truth is used for scoring only.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import run_method, simulate_suite, step_errors, suite
+from nav_suite import run_method, sequence_names, simulate_suite, step_errors
 
 PERTURBATIONS: list[dict[str, str]] = [
     {},
@@ -86,7 +88,8 @@ def _weak_direction_figures(seq_dir: Path, options: dict[str, Any]) -> dict[str,
         share = float((V[:, 0] @ z) ** 2 / max(z @ z, 1e-300))
         axis = gt[k][:3, :3] @ e[3:]
         nees = float(eo @ np.linalg.solve(C, eo)) if C is not None else float("nan")
-        rows.append((k, et[k - 1], er[k - 1], share, axis, nees))
+        turn = [log_se3(T[k] @ invert(T[k - 1]))[3:] for T in (gt, est)]
+        rows.append((k, et[k - 1], er[k - 1], share, axis, nees, *turn))
     return {"rows": rows, "prior_ratio": prior_ratio}
 
 
@@ -97,18 +100,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
     p.add_argument("--perturb", type=int, default=0, help="neutral perturbations (0 = none)")
     a = p.parse_args(argv)
-    names = [n for n in suite() if any(s in n for s in a.only.split(","))]
+    names = sequence_names(only=a.only)
+    if not names:
+        p.error(f"no suite sequence matches --only {a.only!r}")
     folders = simulate_suite(a.out, names)
     opts = dict(o.split("=", 1) for o in a.options)
     for name in names:
         fig = _weak_direction_figures(folders[name], opts)
         rows = fig["rows"]
         print(f"{name}: {len(rows)} wrong steps")
-        for k, t, r, share, axis, nees in rows:
-            ax = " ".join(f"{math.degrees(v):+5.2f}" for v in axis)
+        for k, t, r, share, axis, nees, turn_true, turn_est in rows:
+            ax, tt, te = (
+                " ".join(f"{math.degrees(v):+5.2f}" for v in w) for w in (axis, turn_true, turn_est)
+            )
             print(
                 f"  step {k:3d}: {t:4.2f} m {r:4.2f}°  share in the weakest direction "
-                f"{share:4.2f}  rotation error (target frame, °) [{ax}]  online NEES {nees:5.1f}"
+                f"{share:4.2f}  rotation error (target frame, °) [{ax}]  step rotation true "
+                f"[{tt}] estimated [{te}]  online NEES {nees:5.1f}"
             )
         if rows:
             sh = np.array([r[3] for r in rows])
