@@ -86,10 +86,7 @@ def test_gain_leaves_an_aliased_axis_rotation_more_to_the_motion_model():
     for gamma in (0.0, 100.0, 1000.0):
         vm = VoxelMap(0.3 * s, noise_floor=0.03 * s, inplane_sigma=3 * s, nonplanar_gain=gamma)
         vm.insert(P, 0)
-        fit = solve_scan_to_map(
-            P, vm.search_trees, vm.means, vm.information, T_true, T_true, Lam, 1.0, 3.0, 30,
-            1e-6, 1e-7,
-        )  # fmt: skip
+        fit = solve_scan_to_map(P, vm, T_true, T_true, Lam, 1.0, 3.0, 30, 1e-6, 1e-7)
         rot.append(float(log_se3(fit.T)[5]))
         info.append(float(fit.H[5, 5]))
     true = 0.4 * step

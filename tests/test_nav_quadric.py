@@ -153,8 +153,8 @@ def test_can_turned_about_its_axis_keeps_the_predicted_turn(surface, rng):
         T_true = _turned(3, step)
         Lam = left_information(T_true, np.diag([1.0] * 3 + [math.radians(5.0) ** 2] * 3))
         fit = solve_scan_to_map(
-            _can_scan(rng), m.search_trees, m.means, m.information, T_true, T_true, Lam,
-            gate=3.0, c=3.0, max_iter=30, tol_t=1e-5, tol_r=1e-7, surface=m.surface,
+            _can_scan(rng), m, T_true, T_true, Lam, gate=3.0, c=3.0, max_iter=30, tol_t=1e-5,
+            tol_r=1e-7,
         )  # fmt: skip
         turn = log_se3(np.linalg.inv(_turned(2, step)) @ fit.T)
         turns.append(math.degrees(np.linalg.norm(turn[3:])))

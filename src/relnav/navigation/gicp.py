@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -32,6 +33,9 @@ from relnav.geometry.icp_kernels import _rodrigues_nb
 from relnav.geometry.kdtree import _children
 from relnav.geometry.lie import _rot_log
 from relnav.geometry.se3 import adjoint
+
+if TYPE_CHECKING:
+    from relnav.navigation.voxel_map import VoxelMap
 
 __all__ = ["ScanToMapFit", "left_information", "normal_information", "solve_scan_to_map"]
 
@@ -401,9 +405,7 @@ def _solve_loop(
 
 def solve_scan_to_map(
     P: np.ndarray,
-    trees: tuple,
-    M: np.ndarray,
-    Om: np.ndarray,
+    target: VoxelMap,
     T0: np.ndarray,
     T_pred: np.ndarray,
     Lam: np.ndarray,
@@ -414,18 +416,19 @@ def solve_scan_to_map(
     tol_r: float,
     c0: float = 100.0,
     decay: float = 0.6,
-    surface: tuple[np.ndarray, np.ndarray] | None = None,
+    information: np.ndarray | None = None,
 ) -> ScanToMapFit:
-    """Register the scan ``P`` (sensor frame, ``(N, 3)``) onto the map from ``T0``.
+    """Register the scan ``P`` (sensor frame, ``(N, 3)``) onto the map ``target`` from ``T0``.
 
     Parameters
     ----------
     P : (N, 3) float64
         Scan points, sensor frame, m.
-    trees : tuple
-        :attr:`relnav.navigation.voxel_map.VoxelMap.search_trees` (over the map points ``M``).
-    M, Om : (K, 3), (K, 3, 3) float64
-        Map points (m, target frame) and their information matrices (1/m²).
+    target : relnav.navigation.voxel_map.VoxelMap
+        The map: its points (m, target frame), search trees, per-point information (1/m²) and,
+        with ``surface="quadric"``, its curved patches
+        (:attr:`~relnav.navigation.voxel_map.VoxelMap.surface`; otherwise the plane through
+        each map point).
     T0, T_pred : (4, 4) float64
         Initial guess and motion-model prediction of ``T_target_sensor``.
     Lam : (6, 6) float64
@@ -442,20 +445,22 @@ def solve_scan_to_map(
         Graduated non-convexity: the kernel scale starts at ``c0`` and shrinks by ``decay`` per
         iteration down to ``c``, so that a prediction far from the truth still converges (a
         tight kernel from the start locks onto the nearest wrong pairs).
-    surface : (normals (K, 3), quadric (K, 11)), optional
-        Curved map patches (:attr:`relnav.navigation.voxel_map.VoxelMap.surface`); ``None``:
-        the plane through each map point.
+    information : (K, 3, 3) float64, optional
+        Per-point information used instead of the map's (the navigator's point-to-point
+        refinement on repeated points).
     """
+    surface = target.surface
     if surface is None:
         Nrm, Qd, use_quad = np.zeros((1, 3)), np.zeros((1, 11)), False
     else:
         Nrm = np.ascontiguousarray(surface[0], dtype=np.float64)
         Qd = np.ascontiguousarray(surface[1], dtype=np.float64)
         use_quad = True
+    Om = target.information if information is None else information
     T, H, n_pairs, iters, sw, swd, d2, idx = _solve_loop(
         np.ascontiguousarray(P, dtype=np.float64),
-        trees,
-        M,
+        target.search_trees,
+        target.means,
         Om,
         np.ascontiguousarray(T0, dtype=np.float64),
         np.ascontiguousarray(T_pred, dtype=np.float64),

@@ -591,9 +591,7 @@ def refine_window(nav: Navigator) -> None:
                     m.insert(g.Pm @ g.pose[:3, :3].T + g.pose[:3, 3], g.frame)
             fit = solve_scan_to_map(
                 f.P,
-                m.search_trees,
-                m.means,
-                m.information,
+                m,
                 np.ascontiguousarray(f.pose),
                 np.ascontiguousarray(T_pr),
                 np.ascontiguousarray(Lam),
@@ -604,7 +602,6 @@ def refine_window(nav: Navigator) -> None:
                 c.tolerance * v / f.rng,
                 c0=float(c.kernel_start),
                 decay=float(c.kernel_decay),
-                surface=m.surface,
             )
             overlap = float(np.count_nonzero(fit.d2 >= 0)) / max(len(f.P), 1)
             if not (

@@ -736,9 +736,7 @@ class Navigator:
         v = self.map.voxel_size
         return solve_scan_to_map(
             P,
-            self.map.search_trees,
-            self.map.means,
-            info,
+            self.map,
             np.ascontiguousarray(T0),
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(Lam),
@@ -749,7 +747,7 @@ class Navigator:
             c.tolerance * v / max(rng, 1.0),
             c0=float(c.kernel_start) * kernel_scale,
             decay=float(c.kernel_decay),
-            surface=self.map.surface,
+            information=info,
         )
 
     def _solve(

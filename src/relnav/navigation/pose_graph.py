@@ -547,9 +547,7 @@ def register_submap(
     Lam = 0.5 * (Lam + Lam.T)
     fit = solve_scan_to_map(
         P,
-        target.search_trees,
-        target.means,
-        target.information,
+        target,
         np.ascontiguousarray(T0),
         np.ascontiguousarray(T0),
         np.ascontiguousarray(Lam),
@@ -560,7 +558,6 @@ def register_submap(
         tolerance * v / max(rng, 1.0),
         c0=float(kernel_start),
         decay=float(kernel_decay),
-        surface=target.surface,
     )
     n = max(len(P), 1)
     has = fit.d2 >= 0
