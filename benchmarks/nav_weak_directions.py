@@ -30,7 +30,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import run_method, sequence_names, simulate_suite, step_errors
+from nav_suite import (
+    add_sequence_arguments,
+    run_method,
+    sequence_names,
+    simulate_suite,
+    step_errors,
+)
 
 PERTURBATIONS: list[dict[str, str]] = [
     {},
@@ -95,14 +101,13 @@ def _weak_direction_figures(seq_dir: Path, options: dict[str, Any]) -> dict[str,
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--out", type=Path, default=Path("bench/nav"))
-    p.add_argument("--only", default="iridium-helical-64,orion-inclined-64")
-    p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
+    add_sequence_arguments(p)
+    p.set_defaults(only="iridium-helical-64,orion-inclined-64")
     p.add_argument("--perturb", type=int, default=0, help="neutral perturbations (0 = none)")
     a = p.parse_args(argv)
-    names = sequence_names(only=a.only)
+    names = sequence_names(a.holdout, a.only)
     if not names:
-        p.error(f"no suite sequence matches --only {a.only!r}")
+        p.error(f"no sequence matches --only {a.only!r} (--only '' for all)")
     folders = simulate_suite(a.out, names)
     opts = dict(o.split("=", 1) for o in a.options)
     for name in names:
