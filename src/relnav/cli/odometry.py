@@ -346,6 +346,9 @@ def odometry(
         if key in m:
             table.add_row(key, f"{m[key]:.4g}")
     console.print(table)
+    orbit = run.options.get("finalize", {}).get("orbit")
+    if orbit is not None:
+        console.print(f"orbit model: {orbit['reason']}", highlight=False)
     if seq.gt_poses is not None and n < 2:
         console.print(
             f"[yellow]evaluation needs at least two frames ({n} estimated): metrics skipped[/]"

@@ -56,6 +56,7 @@ from relnav.navigation.gicp import (
 )
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.options import NavigatorConfig, in_map
+from relnav.navigation.orbit import OrbitCorrection, check_orbit_options, correct_azimuth
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
@@ -156,6 +157,7 @@ class Navigator:
         self.spacing0 = float("nan")
         self.n_frames = 0
         self._online: list[np.ndarray] = []
+        self._times: list[float] = []  # each online pose's time, s
         self._last_dt = 1.0
         self._f0 = 0
         self._rescaled = False
@@ -174,6 +176,8 @@ class Navigator:
         self.refinements: list[dict[str, Any]] = []
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
+        self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit_mean_motion
+        check_orbit_options(c)
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -214,7 +218,7 @@ class Navigator:
         P_vv = 4.0 * self.motion.P[6:, 6:].copy()
         self.map, self.motion = None, None
         self.pose = self._initial_pose.copy()
-        self.n_frames, self._online, self._rescaled = 0, [], False
+        self.n_frames, self._online, self._times, self._rescaled = 0, [], [], False
         self._boot_velocity = (v, P_vv)
         self.loop_closer = None
         self.symmetry, self._sym_count = None, 0
@@ -242,6 +246,7 @@ class Navigator:
             out = self._first(P, t, n_raw, t_start)
             self.n_frames += 1
             self._online.append(out.pose.copy())
+            self._times.append(t)
             return out
 
         assert self.motion is not None
@@ -303,6 +308,7 @@ class Navigator:
         step = invert(prev_pose) @ self.pose
         self.n_frames += 1
         self._online.append(self.pose.copy())
+        self._times.append(t)
         return OdometryStep(
             self.pose.copy(),
             step,
@@ -386,6 +392,10 @@ class Navigator:
         log.warning("frame %d: skipped (%s)", self.n_frames, reason)
         self.n_frames += 1
         self._online.append(self.pose.copy())
+        if self.motion is not None and self._rescaled:
+            self._times.append(self.motion.t)
+        else:
+            self._times.append(self._times[-1] + self._last_dt if self._times else 0.0)
         res = RegistrationResult(T_target_source=self.pose.copy(), status="failed", message=reason)
         if self.motion is not None and self.motion.step_covariance is not None:
             res.info["step_covariance"] = self.motion.step_covariance.copy()
@@ -839,4 +849,33 @@ class Navigator:
                 poses = corrected
             else:
                 log.warning("pose graph gave a non-finite trajectory: not applied")
+        if self.config.orbit_mean_motion > 0 and self.map is not None and len(poses):
+            poses = self._orbit_azimuth(poses)
         return poses
+
+    def final_report(self) -> dict[str, Any]:
+        """What :meth:`finalize` decided, for the run's record (``run.json``): the orbit
+        test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`)."""
+        return {} if self.orbit is None else {"orbit": self.orbit.as_dict()}
+
+    def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:
+        """The azimuth about a body of revolution's axis from the target's free relative orbit
+        (``orbit_mean_motion``; :mod:`relnav.navigation.orbit`), recorded in :attr:`orbit`."""
+        c = self.config
+        assert self.map is not None
+        try:
+            corrected, self.orbit = correct_azimuth(
+                poses,
+                np.asarray(self._times, dtype=np.float64),
+                self.map.means,
+                self.map.normals,
+                c.orbit_mean_motion,
+                max_symmetry_ratio=c.orbit_max_symmetry,
+                max_misfit=c.orbit_max_misfit,
+                min_excess=c.orbit_min_excess,
+            )
+        except (np.linalg.LinAlgError, ValueError) as e:
+            log.warning("orbit azimuth: %s: %s (poses unchanged)", type(e).__name__, e)
+            return poses
+        log.info("orbit azimuth: %s", self.orbit.reason)
+        return corrected

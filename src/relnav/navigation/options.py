@@ -426,6 +426,18 @@ class NavigatorConfig:
     loop_prior_scale : float
         Factor on the information of a prior on each keyframe at its tracked pose (the
         filter's pose covariance; 0 = none).
+    orbit_mean_motion : float
+        The target orbit's mean motion ``n``, rad/s (0 = unknown, the default; low Earth orbit
+        ≈ 1.13e-3). A mission input, not a tuning: when given, :meth:`Navigator.finalize` tests
+        whether the trajectory is a free relative orbit about a body of revolution and, if the
+        navigator's azimuth about its axis disagrees with that orbit, takes the azimuth from the
+        orbit (:mod:`relnav.navigation.orbit`; the online poses are unchanged).
+    orbit_max_symmetry, orbit_max_misfit, orbit_min_excess : float
+        The three tests of that correction (:func:`relnav.navigation.orbit.correct_azimuth`):
+        the map's symmetry ratio about its axis, the orbit's RMS misfit to the radius and height
+        about it (fraction of the sensor's median distance from the axis's centre), and how many
+        times larger the misfit of the orbit fitted to the whole positions must be.
+        **[measured]** chosen on the suite (``docs/navigator.md``, "A free relative orbit").
     """
 
     voxel_factor: float = 0.3
@@ -521,3 +533,7 @@ class NavigatorConfig:
     reloc_min_support: int = 6
     reloc_ambiguity: float = 0.3
     reloc_velocity: Literal["keep", "zero", "widen"] = "keep"
+    orbit_mean_motion: float = 0.0
+    orbit_max_symmetry: float = 0.05
+    orbit_max_misfit: float = 0.005
+    orbit_min_excess: float = 3.0

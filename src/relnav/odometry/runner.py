@@ -385,17 +385,21 @@ def run_sequence(
 
             write_tum(paths["estimate"], times, poses)
     name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
+    meta: dict[str, Any] = {
+        "motion_prior": motion_prior,
+        "initial_pose": init_source,
+        "method_options": method_options,
+        "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
+    }
+    report = getattr(odo, "final_report", None)  # what the tracker decided at the end
+    if callable(report) and n and (final_report := report()):
+        meta["finalize"] = final_report
     run = OdometryRun(
         name,
         times,
         poses,
         steps,
-        {
-            "motion_prior": motion_prior,
-            "initial_pose": init_source,
-            "method_options": method_options,
-            "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
-        },
+        meta,
         used_prior=used_prior,
         flagged=flagged,
         frame_time_s=frame_time,
