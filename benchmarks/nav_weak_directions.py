@@ -31,6 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from nav_suite import (
+    MISSION,
     add_sequence_arguments,
     run_method,
     sequence_names,
@@ -62,7 +63,7 @@ def _weak_direction_figures(seq_dir: Path, options: dict[str, Any]) -> dict[str,
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(seq_dir)
-    run = run_sequence(seq, "relnav", **options)
+    run = run_sequence(seq, "relnav", **{**MISSION, **options})
     gt, est = seq.gt_poses, run.poses
     online = np.stack([s.pose for s in run.steps])
     et, er = step_errors(est, gt)

@@ -86,3 +86,12 @@ def _plain(x):
     if isinstance(x, float):
         return round(x, 9)
     return x
+
+
+def test_grid_gives_relnav_the_scripts_mission_input(nav_suite):
+    grid = load_grid(REPO / "configs" / "nav-suite.yaml")
+    relnav = [m for m in grid.methods if m.method == "relnav"]
+    assert len(relnav) == 1 and relnav[0].name == "relnav"
+    assert relnav[0].options.keys() == nav_suite.MISSION.keys()
+    for key, value in nav_suite.MISSION.items():
+        assert relnav[0].options[key] == pytest.approx(value, rel=1e-12)
