@@ -56,6 +56,8 @@ log = logging.getLogger(__name__)
 
 _MIN_FRAMES = 8
 _NEAR_AXIS = 0.2  # frames closer to the axis than this fraction of the median radius
+_MAX_EVALUATIONS = 50  # per fit; an orbit converges in about 10, a path that is no orbit need not
+_MAX_MAP_POINTS = 4000  # map points for the symmetry axis
 
 
 @dataclass
@@ -188,8 +190,13 @@ def correct_azimuth(
     if n < _MIN_FRAMES or not (np.all(np.isfinite(P)) and np.all(np.isfinite(t))):
         out.reason = f"too few frames with finite poses and times (need {_MIN_FRAMES})"
         return T, out
+    stride = max(1, len(map_points) // _MAX_MAP_POINTS)  # an even subset bounds the cost
     sym = symmetry_axis(
-        map_points, map_normals, max_ratio=np.inf, min_arc_deg=0.0, max_axial_fraction=1.0
+        np.asarray(map_points)[::stride],
+        np.asarray(map_normals)[::stride],
+        max_ratio=np.inf,
+        min_arc_deg=0.0,
+        max_axial_fraction=1.0,
     )
     if sym is None:
         out.reason = "no axis in the map"
@@ -215,7 +222,7 @@ def correct_azimuth(
     S = np.column_stack([np.cos(phase), np.sin(phase)])
     AB, *_ = np.linalg.lstsq(S, D0, rcond=None)
     q0 = np.concatenate([[0.0, rho[0], z[0]], AB[1]])
-    fit = least_squares(cylinder_residual, q0, method="lm")
+    fit = least_squares(cylinder_residual, q0, method="lm", max_nfev=_MAX_EVALUATIONS)
     r = cylinder_residual(fit.x)
     misfit = float(np.sqrt(np.mean(r**2)))
 
@@ -224,7 +231,8 @@ def correct_azimuth(
         return (M - local(p[0])).ravel()
 
     A1 = _orbit(fit.x, np.zeros(1), phi0)[0]
-    full = least_squares(full_residual, np.concatenate([[fit.x[0]], A1, fit.x[3:6]]), method="lm")
+    p0 = np.concatenate([[fit.x[0]], A1, fit.x[3:6]])
+    full = least_squares(full_residual, p0, method="lm", max_nfev=_MAX_EVALUATIONS)
     full_misfit = float(np.sqrt(np.mean(full_residual(full.x) ** 2)))
     out.misfit_m = misfit
     out.excess = full_misfit / max(misfit, 1e-12)
