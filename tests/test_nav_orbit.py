@@ -109,42 +109,23 @@ def test_lagging_azimuth_is_taken_from_the_orbit(A, B):
     assert np.max(ang) < 1.0
 
 
-def test_right_azimuth_is_left_alone():
-    rng = np.random.default_rng(1)
-    pts, nrm = _body_of_revolution(rng)
-    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]))
-    est = _lagging(truth, 0.0, rng)
-    out, info = correct_azimuth(est, t, pts, nrm, N_LEO)
-    assert not info.applied and "agrees" in info.reason
-    np.testing.assert_array_equal(out, est)
-
-
-def test_no_free_orbit_is_left_alone():
+@pytest.mark.parametrize(
+    "target, lag, helical, n_factor, reason",
+    [
+        ("revolution", 0.0, False, 1.0, "agrees"),  # the registered azimuth is right
+        ("revolution", 0.25, True, 1.0, "not a free orbit"),  # a helical approach
+        ("revolution", 0.25, False, 1.2, "not a free orbit"),  # another orbit's mean motion
+        ("box", 0.25, False, 1.0, "no body of revolution"),
+    ],
+)
+def test_left_alone(target, lag, helical, n_factor, reason):
     rng = np.random.default_rng(2)
-    pts, nrm = _body_of_revolution(rng)
-    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]), helical=True)
-    est = _lagging(truth, 0.25, rng)
-    out, info = correct_azimuth(est, t, pts, nrm, N_LEO)
-    assert not info.applied and "not a free orbit" in info.reason
-    np.testing.assert_array_equal(out, est)
-
-
-def test_wrong_mean_motion_is_no_free_orbit():
-    rng = np.random.default_rng(2)
-    pts, nrm = _body_of_revolution(rng)
-    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]))
-    est = _lagging(truth, 0.25, rng)
-    _, info = correct_azimuth(est, t, pts, nrm, 1.2 * N_LEO)
-    assert not info.applied and "not a free orbit" in info.reason
-
-
-def test_a_box_is_no_body_of_revolution():
-    rng = np.random.default_rng(4)
-    pts, nrm = _box()
-    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]))
-    est = _lagging(truth, 0.25, rng)
-    out, info = correct_azimuth(est, t, pts, nrm, N_LEO)
-    assert not info.applied and "no body of revolution" in info.reason
+    pts, nrm = _body_of_revolution(rng) if target == "revolution" else _box()
+    A, B = np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0])
+    truth, t = _trajectory(A, B, helical=helical)
+    est = _lagging(truth, lag, rng)
+    out, info = correct_azimuth(est, t, pts, nrm, n_factor * N_LEO)
+    assert not info.applied and reason in info.reason
     np.testing.assert_array_equal(out, est)
 
 
