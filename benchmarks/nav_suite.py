@@ -76,6 +76,19 @@ def _ellipse(a: float, b: float, loops: float, tilt: float, frames: int) -> dict
     }
 
 
+def _inspection(a: float, b: float, tilt: float) -> dict[str, Any]:
+    """One inspection ellipse (semi-axes ``a``, ``b`` m, tilted ``tilt`` degrees) per low Earth
+    orbit, 200 frames."""
+    return {
+        "frames": 200,
+        "dt": LEO_PERIOD_S / 199,
+        "trajectory": {
+            "kind": "ellipse-of-inspection",
+            "params": {"semi_major": a, "semi_minor": b, "tilt_deg": tilt},
+        },
+    }
+
+
 def _helical(r0: float, r1: float, h0: float, h1: float, turns: float) -> dict[str, Any]:
     """A helical approach from radius ``r0`` to ``r1`` (m), height ``h0`` to ``h1`` (m), in 150
     frames 10 s apart."""
@@ -118,12 +131,7 @@ def suite() -> dict[str, dict[str, Any]]:
         # the capsule's symmetry axis is y; the inspection ellipse is inclined 35° to it
         "target": _mesh("orion", "capsule", 7.0),
         "sensors": [_flash(64)],
-        "frames": 200,
-        "dt": LEO_PERIOD_S / 199,
-        "trajectory": {
-            "kind": "ellipse-of-inspection",
-            "params": {"semi_major": 50.0, "semi_minor": 35.0, "tilt_deg": 35.0},
-        },
+        **_inspection(50.0, 35.0, 35.0),
     }
     s["envisat-tumble-64"] = {
         "target": {"name": "envisat", "scale_to": 16.0},
@@ -185,6 +193,43 @@ def holdout() -> dict[str, dict[str, Any]]:
         "sensors": [_flash(128)],
         "seed": 14,
         **_ellipse(45.0, 40.0, 2.5, 50.0, 250),
+    }
+    # made after the orbit test's thresholds were frozen (session 14), never used to choose them
+    s["orion-tilt60-64"] = {
+        "target": _mesh("orion", "capsule", 7.0),
+        "sensors": [_flash(64)],
+        "seed": 31,
+        **_inspection(45.0, 32.0, 60.0),
+    }
+    s["capsule-ellipse-64"] = {
+        "target": {"name": "capsule", "scale_to": 6.0},
+        "sensors": [_flash(64)],
+        "seed": 32,
+        **_ellipse(45.0, 40.0, 1.5, 30.0, 150),
+    }
+    s["orion-ellipse-64"] = {
+        "target": _mesh("orion", "capsule", 7.0),
+        "sensors": [_flash(64)],
+        "seed": 33,
+        **_ellipse(55.0, 40.0, 2.0, 15.0, 200),
+    }
+    s["aura-inclined-64"] = {
+        "target": _mesh("aura", "envisat", 16.0),
+        "sensors": [_flash(64)],
+        "seed": 34,
+        **_inspection(50.0, 35.0, 35.0),
+    }
+    s["asteroid-ellipse-64"] = {
+        "target": {"name": "asteroid", "scale_to": 12.0},
+        "sensors": [_flash(64)],
+        "seed": 35,
+        **_ellipse(50.0, 40.0, 2.0, 20.0, 200),
+    }
+    s["voyager-inclined-64"] = {
+        "target": _mesh("voyager", "voyager", 12.3),
+        "sensors": [_flash(64)],
+        "seed": 36,
+        **_inspection(55.0, 40.0, 50.0),
     }
     return _finish(s)
 
