@@ -189,3 +189,24 @@ def test_navigator_records_its_verdict():
     assert verdict["reason"] and isinstance(verdict["applied"], bool)
     off = run_sequence(scans, "relnav", initial_pose=truth[0], init_window=0)
     assert "finalize" not in off.options
+
+
+def test_a_skipped_frame_keeps_times_and_poses_aligned():
+    """An unreadable scan (``skip_frame``) still gets a time, so the orbit test sees one time
+    per pose (and does not crash) whatever frames were lost."""
+    from relnav.navigation import Navigator
+    from relnav.scan import Scan
+
+    rng = np.random.default_rng(7)
+    pts, _ = _body_of_revolution(rng)
+    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]), frames=12)
+    nav = Navigator(initial_pose=truth[0], orbit_mean_motion=N_LEO, init_window=0)
+    for k, (T, tk) in enumerate(zip(truth, t, strict=True)):
+        if k in (0, 5):  # before the first scan and in the middle
+            nav.skip_frame("unreadable")
+        Tinv = np.linalg.inv(T)
+        P = pts[rng.choice(len(pts), 800, replace=False)] @ Tinv[:3, :3].T + Tinv[:3, 3]
+        nav.register_frame(Scan(points=P[P[:, 2] > 0], time=float(tk)))
+    poses = nav.finalize()
+    assert len(poses) == len(nav._times) == 14
+    assert np.all(np.isfinite(poses)) and nav.orbit is not None
