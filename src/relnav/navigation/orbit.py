@@ -39,7 +39,6 @@ poses are returned unchanged.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -51,8 +50,6 @@ from relnav.geometry.rotations import rotvec_to_matrix
 from relnav.navigation.symmetry import symmetry_axis
 
 __all__ = ["OrbitCorrection", "check_orbit_options", "correct_azimuth"]
-
-log = logging.getLogger(__name__)
 
 _MIN_FRAMES = 8
 _NEAR_AXIS = 0.2  # frames closer to the axis than this fraction of the median radius
@@ -253,7 +250,7 @@ def correct_azimuth(
     M = _orbit(fit.x, phase, phi0)
     d = np.angle(np.exp(1j * (np.arctan2(M[:, 1], M[:, 0]) - np.arctan2(D[:, 1], D[:, 0]))))
     d -= d[0]
-    # near the axis the azimuth is undefined (a few metres of position make tens of degrees):
+    # near the axis the azimuth is undefined (centimetres of position make degrees of azimuth):
     # there the correction, a slowly varying bias of the navigator's azimuth, is interpolated
     # in time between the frames farther out (the first frame, the given pose, always counts)
     far = np.minimum(np.hypot(D[:, 0], D[:, 1]), np.hypot(M[:, 0], M[:, 1]))
