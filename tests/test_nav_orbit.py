@@ -154,6 +154,8 @@ def test_bad_input():
     [
         {"orbit_mean_motion": -1e-3},
         {"orbit_mean_motion": float("nan")},
+        {"orbit_mean_motion": float("inf")},
+        {"orbit_min_excess": float("inf")},
         {"orbit_max_symmetry": 0.0},
         {"orbit_max_misfit": -0.1},
         {"orbit_min_excess": 0.5},

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from relnav.errors import ConfigError
 
 __all__ = [
+    "FINITE_OPTIONS",
     "OPTION_RANGES",
     "StrictModel",
     "check_options",
@@ -185,9 +187,21 @@ OPTION_RANGES: dict[str, _Range] = {
     "reloc_max_doubt": (0, True, None, False),
     "reloc_min_support": (3, True, None, False),
     "reloc_ambiguity": (0, True, 1, True),
+    # its orbit test (relnav.navigation.orbit)
+    "orbit_mean_motion": (0, True, None, False),
+    "orbit_max_symmetry": (0, False, None, False),
+    "orbit_max_misfit": (0, False, None, False),
+    "orbit_min_excess": (1, True, None, False),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""
+
+FINITE_OPTIONS: frozenset[str] = frozenset(
+    {"orbit_mean_motion", "orbit_max_symmetry", "orbit_max_misfit", "orbit_min_excess"}
+)
+"""Options that must also be finite (where an infinity is no value: a mean motion, a
+threshold the orbit test compares with); others, such as a correspondence distance, may be
+``inf`` (no limit)."""
 
 
 def did_you_mean(word: str, choices: Any) -> str:
@@ -310,6 +324,8 @@ def check_options(
             continue
         if value != value:  # NaN
             raise ConfigError(f"{where}: option {key} is NaN")
+        if key in FINITE_OPTIONS and not math.isfinite(value):
+            raise ConfigError(f"{where}: option {key}={options[key]!r} is not finite")
         r = OPTION_RANGES.get(key)
         if r is not None and not _in_range(float(value), r):
             raise ConfigError(

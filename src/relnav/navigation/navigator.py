@@ -56,7 +56,7 @@ from relnav.navigation.gicp import (
 )
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.options import NavigatorConfig, in_map
-from relnav.navigation.orbit import OrbitCorrection, check_orbit_options, correct_azimuth
+from relnav.navigation.orbit import OrbitCorrection, correct_azimuth
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
@@ -177,7 +177,6 @@ class Navigator:
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit_mean_motion
-        check_orbit_options(c)
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:

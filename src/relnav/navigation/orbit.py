@@ -49,7 +49,7 @@ from scipy.optimize import least_squares
 from relnav.geometry.rotations import rotvec_to_matrix
 from relnav.navigation.symmetry import symmetry_axis
 
-__all__ = ["OrbitCorrection", "check_orbit_options", "correct_azimuth"]
+__all__ = ["OrbitCorrection", "correct_azimuth"]
 
 _MIN_FRAMES = 8
 _NEAR_AXIS = 0.2  # frames closer to the axis than this fraction of the median radius
@@ -104,23 +104,6 @@ class OrbitCorrection:
             "excess": float(self.excess),
             "max_correction_deg": float(np.max(np.abs(self.correction_deg), initial=0.0)),
         }
-
-
-def check_orbit_options(config: Any) -> None:
-    """Raise :class:`~relnav.errors.ConfigError` for out-of-range ``orbit_*`` options of a
-    :class:`~relnav.navigation.options.NavigatorConfig`."""
-    from relnav.errors import ConfigError
-
-    checks = {
-        "orbit_mean_motion": config.orbit_mean_motion >= 0,
-        "orbit_max_symmetry": config.orbit_max_symmetry > 0,
-        "orbit_max_misfit": config.orbit_max_misfit > 0,
-        "orbit_min_excess": config.orbit_min_excess >= 1,
-    }
-    for key, ok in checks.items():
-        value = float(getattr(config, key))
-        if not (math.isfinite(value) and ok):
-            raise ConfigError(f"method 'relnav': option {key}={value!r} is out of range")
 
 
 def _basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
