@@ -32,6 +32,15 @@ innovations on the SUITE sequence envisat-tumble-64's N runs, without ground tru
 (:func:`relnav.navigation.state.fit_noise_scales`, ~4 min for 20 runs), prints them and then
 reports both sequences with them (aura-tumble-64 is held out: only checked).
 
+``--error-structure`` (with ``--seeds N``) prints what the navigator's online pose error is
+made of on both sequences, from the truth (``T_b_m``: the map's frame in the target's): the
+per-run offset (mean over the frames after the first 30; RMS per target axis), the wander
+around it (RMS, autocorrelation at lags 1, 5 and 20 frames), how the offset lies in the
+eigen-axes of the start-up steps' summed rotation covariance (10 frames;
+:func:`relnav.navigation.state.map_offset_rotation` keeps the largest: mean squared offset
+over variance per axis, 1 = calibrated) and what the random-walk bias would give it by the
+last frame (summed step covariances).
+
 ``-S key=value`` passes an option to :func:`relnav.navigation.state.relative_state` (numbers
 are read as floats, ``none`` as None), e.g. ``-S drift=map``, ``-S robust_dof=5``,
 ``-S initial_bias=10`` (the start-up frames' drift as the map's initial offset) or
@@ -227,6 +236,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="noise scales by the innovations' likelihood on envisat-tumble-64 (with --seeds)",
     )
+    p.add_argument(
+        "--error-structure",
+        action="store_true",
+        help="the navigator's pose error: offset, wander, start-up axes (with --seeds)",
+    )
     a = p.parse_args(argv)
     opts = dict(kv.split("=", 1) for kv in a.options)
     state = {k: _value(v) for k, v in (kv.split("=", 1) for kv in a.state)}
@@ -237,12 +251,86 @@ def main(argv: list[str] | None = None) -> int:
         for name, folder in simulate_suite(a.out, TUMBLING).items():
             report_single(name, track(folder, opts, state=state))
         return 0
+    if a.error_structure:
+        for name in TUMBLING:
+            report_error_structure(name, simulate_seeds(a.out, name, a.seeds), opts)
+        return 0
     if a.fit:
         state = {**state, **fit_scales(a.out, TUMBLING[0], a.seeds, opts, state)}
     for name in TUMBLING:
         folders = simulate_seeds(a.out, name, a.seeds)
         report_monte_carlo(name, [track(f, opts, state=state) for f in folders])
     return 0
+
+
+def report_error_structure(name: str, folders: list[Path], opts: dict[str, str]) -> None:
+    """The navigator's pose error on ``name``'s runs: offset, wander, start-up axes."""
+    from relnav.geometry.lie import log_se3
+    from relnav.geometry.se3 import invert
+    from relnav.io.sequences import ScanSequence
+    from relnav.navigation.options import in_map
+    from relnav.navigation.state import StateRecord, drift_covariance
+    from relnav.odometry import run_sequence
+
+    offsets, wander, axes, walk = [], [], [], []
+    for folder in folders:
+        seq = ScanSequence(folder)
+        run = run_sequence(seq, "relnav", **opts)
+        steps = [StateRecord.from_step(st) for st in run.steps]
+        # the map's frame in the target's: [ρ (m), φ (rad)], target axes
+        E = np.array(
+            [
+                log_se3(G @ invert(st.pose)) if in_map(st) else np.full(6, np.nan)
+                for G, st in zip(seq.gt_poses, steps, strict=False)
+            ]
+        )
+        off = np.nanmean(E[30:], axis=0)
+        offsets.append(off)
+        wander.append(E[30:] - off)
+        Q = [drift_covariance(st.step_covariance, st.pose) for st in steps[1:]
+             if in_map(st) and st.step_covariance is not None]  # fmt: skip
+        w, V = np.linalg.eigh(sum(q[3:, 3:] for q in Q[:10]))
+        axes.append((V.T @ off[3:]) ** 2 / w)
+        walk.append(np.sqrt([np.trace(sum(Q)[:3, :3]), np.trace(sum(Q)[3:, 3:])]))
+    O = np.array(offsets)
+    W = np.concatenate(wander)
+
+    def norm_rms(X: np.ndarray, sl: slice) -> float:
+        return float(np.sqrt(np.nanmean(np.sum(X[:, sl] ** 2, axis=1))))
+
+    t, r = slice(0, 3), slice(3, 6)
+    print(f"{name}: {len(folders)} noise seeds, the map's frame in the target's (frames 30+)")
+    print(
+        f"  offset per run, RMS: {norm_rms(O, t):.3f} m (per axis "
+        + " / ".join(f"{x:.3f}" for x in np.sqrt(np.mean(O[:, t] ** 2, axis=0)))
+        + f"), {np.degrees(norm_rms(O, r)):.2f}° (per axis "
+        + " / ".join(f"{np.degrees(x):.2f}" for x in np.sqrt(np.mean(O[:, r] ** 2, axis=0)))
+        + ")"
+    )
+    print(f"  wander around it, RMS: {norm_rms(W, t):.3f} m, {np.degrees(norm_rms(W, r)):.2f}°")
+    for lag in (1, 5, 20):
+        rho = []
+        for w in wander:
+            x, y = w[:-lag], w[lag:]
+            ok = np.all(np.isfinite(x), axis=1) & np.all(np.isfinite(y), axis=1)
+            rho.append(np.sum(x[ok] * y[ok], axis=0) / np.sum(x[ok] ** 2, axis=0))
+        m = np.mean(rho, axis=0)
+        print(
+            f"  wander autocorrelation at lag {lag:2d}: translation "
+            + " / ".join(f"{x:.2f}" for x in m[:3])
+            + ", rotation "
+            + " / ".join(f"{x:.2f}" for x in m[3:])
+        )
+    print(
+        "  rotation offset in the start-up's (10 steps) covariance axes, mean offset² / "
+        "variance, smallest → largest axis: "
+        + " / ".join(f"{x:.2f}" for x in np.mean(axes, axis=0))
+    )
+    walk_m = np.mean(walk, axis=0)
+    print(
+        f"  a random walk of every step's covariance by the last frame: {walk_m[0]:.2f} m, "
+        f"{np.degrees(walk_m[1]):.2f}°"
+    )
 
 
 def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: dict) -> dict:

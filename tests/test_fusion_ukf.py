@@ -343,3 +343,56 @@ def test_robust_update_reports_its_scaled_measurement_covariance() -> None:
     assert robust.meas_cov[0, 0] > 2.0 * plain.meas_cov[0, 0]
     np.testing.assert_allclose(robust.meas_cov / robust.meas_cov[0, 0],
                                plain.meas_cov / plain.meas_cov[0, 0])  # fmt: skip
+
+
+def test_gauss_markov_observer_bias_decays_between_observations():
+    """bias_correlation_time=(τ_p, τ_θ): over a step of Δt the bias's variances shrink by
+    e^(−2Δt/τ) and its mean by e^(−Δt/τ); inf (or None) is the random walk, which keeps
+    them; non-positive times are refused."""
+
+    def biased(tau):
+        f = TwistorUKF(dt=2.0, observer_bias=True, bias_correlation_time=tau)
+        f.initialize([10.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+        f.add_observer_drift(np.diag([1e-2] * 3 + [1e-4] * 3))
+        f._b = np.array([0.1, 0.0, 0.0, 0.01, 0.0, 0.0])
+        ib = f._ib
+        before = np.diag(f.covariance[ib : ib + 6, ib : ib + 6]).copy()
+        f.predict(2.0)
+        return f, before, np.diag(f.covariance[ib : ib + 6, ib : ib + 6])
+
+    f, before, after = biased((10.0, 4.0))
+    phi = np.repeat([np.exp(-2.0 / 10.0), np.exp(-2.0 / 4.0)], 3)
+    np.testing.assert_allclose(after, before * phi**2, rtol=1e-9)
+    np.testing.assert_allclose(f.observer_bias_estimate, [0.1 * phi[0], 0, 0, 0.01 * phi[3], 0, 0])
+    assert f.settings()["bias_correlation_time"] == (10.0, 4.0)
+    for walk in (None, np.inf, (np.inf, np.inf)):
+        f, before, after = biased(walk)
+        np.testing.assert_allclose(after, before, rtol=1e-12)
+        assert f.settings()["bias_correlation_time"] is None
+    for bad in (0.0, -1.0, (5.0, 0.0)):
+        with pytest.raises(ConfigError):
+            TwistorUKF(observer_bias=True, bias_correlation_time=bad)
+
+
+def test_offset_drift_grows_the_body_offset_in_body_axes():
+    """add_offset_drift: a sensor-axis covariance of the reference point goes into the
+    body-frame offset's block, turned by the attitude; a no-op without centre_offset; the
+    axis pseudo-measurement is off with axis_sigma=inf."""
+
+    f = TwistorUKF(centre_offset=True, axis_sigma=np.inf)
+    q = np.array([0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4)])  # 90° about z
+    f.initialize([10.0, 0.0, 0.0], q)
+    before = f.covariance[15:18, 15:18].copy()
+    f.add_offset_drift(np.diag([4e-2, 1e-2, 0.0]))
+    grown = f.covariance[15:18, 15:18] - before
+    np.testing.assert_allclose(np.diag(grown), [1e-2, 4e-2, 0.0], atol=1e-12)  # x ↔ y
+    f._w = np.array([0.0, 0.0, 0.1])  # a well-known spin: the pseudo-measurement would apply
+    f._axis_constraint()
+    np.testing.assert_array_equal(f.covariance[15:18, 15:18] - before, grown)
+    plain = TwistorUKF()
+    plain.initialize([10.0, 0.0, 0.0], q)
+    P = plain.covariance.copy()
+    plain.add_offset_drift(np.eye(3))
+    np.testing.assert_array_equal(plain.covariance, P)
+    with pytest.raises(InputError):
+        f.add_offset_drift(np.eye(2))

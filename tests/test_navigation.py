@@ -667,3 +667,57 @@ def test_relative_state_initial_bias_on_a_short_run(tumble_run):
     for bad in (-1, 2.5, True, "startup"):
         with pytest.raises(ConfigError):
             relative_state(run, steps=steps, initial_bias=bad)
+
+
+def test_map_offset_rotation_is_the_start_up_drifts_largest_axis(rng):
+    """map_offset_rotation: the start-up steps' rotation covariances summed, kept along their
+    largest axis (rank one, its variance the largest eigenvalue); none without start-up."""
+    from relnav.navigation.state import StateRecord, drift_covariance, map_offset_rotation
+
+    frames = [StateRecord("first", np.eye(4))]
+    for _ in range(6):
+        A = rng.normal(size=(6, 6))
+        frames.append(StateRecord("ok", np.eye(4), None, A @ A.T))
+    C = map_offset_rotation(frames, 4)
+    S = sum(drift_covariance(f.step_covariance, f.pose)[3:, 3:] for f in frames[1:5])
+    w, V = np.linalg.eigh(S)
+    np.testing.assert_allclose(C, w[-1] * np.outer(V[:, -1], V[:, -1]), atol=1e-12)
+    assert np.linalg.matrix_rank(C, tol=1e-12 * w[-1]) == 1
+    assert not map_offset_rotation(frames, 0).any()
+
+
+def test_relative_state_offset_drift_on_a_short_run(tumble_run):
+    """drift="offset": the map's rotation offset widens the attitude covariance along the
+    start-up's weakest axis at every estimated step, the rate is still recovered, the body
+    offset and the Gauss–Markov wander reach the UKF's settings; the options are checked."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import StateRecord, map_offset_rotation, relative_state
+
+    seq, run = tumble_run
+    steps = [StateRecord.from_step(s) for s in run.steps]
+    res = relative_state(run, steps=steps, gt_poses=seq.gt_poses, drift="offset")
+    assert res.settings["centre_offset"] and res.settings["observer_bias"]
+    period = float(np.median(np.diff(run.timestamps)))
+    np.testing.assert_allclose(res.settings["bias_correlation_time"], [50 * period, 10 * period])
+    C = map_offset_rotation(steps, 10)
+    u = np.linalg.eigh(C)[1][:, -1]
+    live = [k for k in range(len(res)) if np.all(np.isfinite(res.covariance[k]))]
+    assert live
+    for k in live:
+        assert u @ res.covariance[k][6:9, 6:9] @ u >= u @ C @ u * (1 - 1e-9)
+        assert np.linalg.eigvalsh(res.covariance[k]).min() > -1e-12
+    k0 = len(res) // 3
+    err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
+    assert np.median(err) < 0.1 and np.max(err) < 0.2
+    no_offset = relative_state(run, steps=steps, drift="offset", offset_frames=0)
+    assert no_offset.settings["centre_offset"]
+    for bad in (
+        {"filter": "ekf"},
+        {"offset_frames": -1},
+        {"offset_frames": 2.5},
+        {"wander_frames": 0.0},
+        {"wander_rotation_frames": -3.0},
+        {"initial_bias": 5},
+    ):
+        with pytest.raises(ConfigError):
+            relative_state(run, steps=steps, drift="offset", **bad)

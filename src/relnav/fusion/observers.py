@@ -62,6 +62,10 @@ class Observation:
     drift : (6, 6) ndarray, optional
         Growth of the observer's own slowly varying error since its previous observation
         (same coordinates), for ``TwistorUKF(observer_bias=True)``.
+    offset_drift : (3, 3) ndarray, optional
+        Growth of the offset of the observer's reference point from the target's origin since
+        its previous observation (m², sensor axes), for ``TwistorUKF(centre_offset=True)``
+        (:meth:`~relnav.fusion.ukf.TwistorUKF.add_offset_drift`).
     frame : int, optional
         The observer's id of this frame when the frame was merged into its model (the keys of
         later observations' ``sources``); ``None``: not merged.
@@ -78,6 +82,7 @@ class Observation:
     quality: float = 1.0
     R: np.ndarray | None = None
     drift: np.ndarray | None = None
+    offset_drift: np.ndarray | None = None
     frame: int | None = None
     sources: dict[int, float] | None = None
 

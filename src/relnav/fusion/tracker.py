@@ -368,6 +368,8 @@ class Tracker:
         R = obs.R
         if obs.drift is not None and hasattr(f, "add_observer_drift"):
             f.add_observer_drift(obs.drift)
+        if obs.offset_drift is not None and hasattr(f, "add_offset_drift"):
+            f.add_offset_drift(obs.offset_drift)
         if obs.sources is not None and hasattr(f, "set_merge_sources"):
             f.set_merge_sources(obs.frame, obs.sources)
         if self.noise_scale == "innovation":

@@ -112,6 +112,19 @@ _IDLE_VAR = 1e-12
 _EXACT_VAR = 1e-12
 _USED_SHARE = 0.02
 
+
+def _correlation_times(value: Any) -> tuple[float, float] | None:
+    """``bias_correlation_time`` as ``(τ_p, τ_θ)`` s, or None for a random walk."""
+    if value is None:
+        return None
+    taus = np.broadcast_to(np.asarray(value, dtype=np.float64), (2,))
+    if not np.all(taus > 0.0):
+        raise ConfigError(f"bias_correlation_time must be > 0 s (or inf), got {value!r}")
+    if np.all(np.isinf(taus)):
+        return None
+    return float(taus[0]), float(taus[1])
+
+
 Innovation = Literal["position+rotation", "twist"]
 CovUpdate = Literal["standard", "joseph"]
 UpdateSigma = Literal["redraw", "propagated"]
@@ -158,7 +171,8 @@ class TwistorUKF(PoseFilter):
         pseudo-measurement ``ω̂ · c = 0`` (1σ ``axis_sigma`` m, applied after each update while
         ``|ω| > 3σ_ω``) picks the point of the axis nearest the reference point.
     axis_sigma : float
-        See ``centre_offset`` (m, default 1e-3).
+        See ``centre_offset`` (m, default 1e-3; ``inf``: no pseudo-measurement, the offset
+        along the axis then kept by its prior alone).
     observer_bias : bool
         **[interpretation, not in Paper 2]** Carry the observer's slowly varying error as a
         6-D random-walk bias ``β = [β_p (m), β_θ (rad)]`` (last in the error state): the
@@ -167,6 +181,13 @@ class TwistorUKF(PoseFilter):
         by :meth:`add_observer_drift` — for the contour model, the covariance of each frame
         merged into the model, which the next registrations inherit. Without it a drifting
         observer's errors are treated as independent from frame to frame.
+    bias_correlation_time : float or (float, float), optional
+        **[interpretation, not in Paper 2]** Correlation times ``(τ_p, τ_θ)`` (s; one number
+        for both) of a first-order Gauss–Markov observer bias instead of a random walk: over
+        a step of ``Δt`` the bias and its covariance's rows and columns are multiplied by
+        ``e^(−Δt/τ)``, while :meth:`add_observer_drift` still adds its growth. A stationary
+        error of an observer that keeps re-registering against the same model (default None:
+        random walk, ``τ = ∞``).
     bias_frame : {"sensor", "body"}
         Axes of the position bias ``β_p`` **[interpretation]**. ``"sensor"`` (default): the
         measured point is ``d + R c + β_p``. ``"body"``: ``d + R (c + β_p)`` — a bias fixed to
@@ -247,6 +268,7 @@ class TwistorUKF(PoseFilter):
         centre_offset: bool = False,
         axis_sigma: float = 1e-3,
         observer_bias: bool = False,
+        bias_correlation_time: float | tuple[float, float] | None = None,
         bias_frame: Literal["sensor", "body"] = "sensor",
         merge_slots: int = 0,
         robust_dof: float | None = None,
@@ -258,6 +280,7 @@ class TwistorUKF(PoseFilter):
         self.robust_dof = None if robust_dof is None else float(robust_dof)
         self.centre_offset = bool(centre_offset)
         self.observer_bias = bool(observer_bias)
+        self.bias_correlation_time = _correlation_times(bias_correlation_time)
         if bias_frame not in ("sensor", "body"):
             raise ConfigError(f"bias_frame must be 'sensor' or 'body', got {bias_frame!r}")
         self.bias_frame = bias_frame
@@ -274,7 +297,7 @@ class TwistorUKF(PoseFilter):
         self._slot_used = np.zeros(self.merge_slots)
         self._pending: tuple[int | None, dict[int, float]] | None = None
         self._n_merges = 0
-        if not (math.isfinite(float(axis_sigma)) and float(axis_sigma) > 0.0):
+        if not float(axis_sigma) > 0.0:
             raise ConfigError(f"axis_sigma must be > 0 m, got {axis_sigma!r}")
         self.axis_sigma = float(axis_sigma)
         self._c = np.zeros(3)
@@ -429,6 +452,30 @@ class TwistorUKF(PoseFilter):
         self._P[ib : ib + 6, ib : ib + 6] += _sym(Q)
         self._prop = None
 
+    def add_offset_drift(self, Q: np.ndarray) -> None:
+        """Add ``Q`` ``(3, 3)`` (m², sensor axes) to the covariance of the body-frame offset ``c``
+        (rotated into body axes with the current attitude; no-op without ``centre_offset``): an
+        observer whose reference point moves on the target while its model is being built."""
+        if not self.centre_offset:
+            return
+        Q = np.asarray(Q, dtype=np.float64)
+        if Q.shape != (3, 3) or not np.all(np.isfinite(Q)):
+            raise InputError(f"offset drift must be a finite (3, 3) matrix, got {Q.shape}")
+        R_bs = quat_to_matrix(self._q).T
+        self._P[15:18, 15:18] += _sym(R_bs @ Q @ R_bs.T)
+        self._prop = None
+
+    def _decay_bias(self, P: np.ndarray, dt: float) -> np.ndarray:
+        """Gauss–Markov observer bias over ``dt`` s: ``β ← φ β``, rows and columns of ``P``
+        by ``φ = e^(−dt/τ)`` (``bias_correlation_time``)."""
+        assert self.bias_correlation_time is not None
+        tau = np.repeat(np.asarray(self.bias_correlation_time), 3)
+        phi = np.exp(-max(float(dt), 0.0) / tau)
+        self._b = phi * self._b
+        D = np.ones(self.dim)
+        D[self._ib : self._ib + 6] = phi
+        return D[:, None] * P * D[None, :]
+
     @property
     def observer_bias_estimate(self) -> np.ndarray:
         """Current observer bias ``[β_p (m), β_θ (rad)]`` ``(6,)`` (zeros without it)."""
@@ -535,6 +582,8 @@ class TwistorUKF(PoseFilter):
         P = (dX * self.Wc[:, None]).T @ dX
         P += self._native_from_phys_var(self._phys_process_var(dt))
         self._d, self._v, self._q, self._w, self._c = d_m, v_m, q_m, w_m, c_m
+        if self.observer_bias and self.bias_correlation_time is not None:
+            P = self._decay_bias(P, dt)
         self._P = _sym(P)
         self._prop = {"dX": dX, "d": self._reference(d, q, c), "q": q}
 
@@ -702,6 +751,8 @@ class TwistorUKF(PoseFilter):
 
     def _axis_constraint(self) -> None:
         """Pseudo-measurement ``ω̂ · c = 0`` (class docstring), a linear Kalman update."""
+        if not math.isfinite(self.axis_sigma):
+            return
         sw = math.sqrt(max(float(np.trace(self._P[12:15, 12:15])) / 3.0, 0.0))
         nw = float(np.linalg.norm(self._w))
         if not nw > 3.0 * sw:
@@ -727,6 +778,7 @@ class TwistorUKF(PoseFilter):
             covariance_update=self.covariance_update,
             centre_offset=self.centre_offset,
             observer_bias=self.observer_bias,
+            bias_correlation_time=self.bias_correlation_time,
             bias_frame=self.bias_frame,
             merge_slots=self.merge_slots,
             robust_dof=self.robust_dof,
