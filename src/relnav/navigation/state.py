@@ -227,7 +227,7 @@ def relative_state(
         ``"offset"`` **[interpretation]** (UKF only): the navigator's error as what it was
         measured to be on the tumbling sequences, a map offset set during the start-up plus a
         stationary wander around it (:func:`map_offset_rotation`,
-        ``docs/results/nav/state_drift.md``). The first ``offset_frames`` merged steps' drift
+        ``docs/results/nav/state_offset.md``). The first ``offset_frames`` merged steps' drift
         builds the offset: its translation moves the map origin on the target (the UKF's
         body-frame offset ``c``, ``centre_offset=True`` without the axis pseudo-measurement,
         grown frame by frame, then constant), its rotation, which a constant-rate spin cannot
@@ -300,12 +300,7 @@ def relative_state(
             raise ConfigError(f"{label} must be a finite number >= 0, got {value!r}")
     if not measurement_scale > 0.0:
         raise ConfigError(f"measurement_scale must be > 0, got {measurement_scale!r}")
-    if isinstance(initial_bias, float) and initial_bias.is_integer():
-        initial_bias = int(initial_bias)  # a command line's number
-    if not (isinstance(initial_bias, int) and not isinstance(initial_bias, bool)) or (
-        initial_bias < 0
-    ):
-        raise ConfigError(f"initial_bias must be a number of frames >= 0, got {initial_bias!r}")
+    initial_bias = _frame_count(initial_bias, "initial_bias")
     if offset_mode and initial_bias:
         raise ConfigError("initial_bias and drift='offset' are alternatives (see offset_frames)")
     if process_noise not in ("physics", "poses"):
@@ -576,6 +571,15 @@ def _start_up_steps(steps: Sequence[Any], n_frames: int) -> list[int]:
     return later[: int(n_frames)] if n_frames > 0 else []
 
 
+def _frame_count(value: Any, label: str) -> int:
+    """A number of frames >= 0 (a command line's whole float accepted), else ConfigError."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise ConfigError(f"{label} must be a number of frames >= 0, got {value!r}")
+    return value
+
+
 def _frame_period(timestamps: Any) -> float:
     """Median frame period, s (1 when it cannot be told)."""
     t = np.asarray(timestamps, dtype=float)
@@ -587,10 +591,7 @@ def _check_offset_options(filter: str, n_frames: Any, *frames: Any) -> int:
     """Check the options of ``drift="offset"``; returns ``offset_frames`` as an int."""
     if filter != "ukf":
         raise ConfigError("drift='offset' needs the UKF (its body offset and observer bias)")
-    if isinstance(n_frames, float) and n_frames.is_integer():
-        n_frames = int(n_frames)  # a command line's number
-    if not isinstance(n_frames, int) or isinstance(n_frames, bool) or n_frames < 0:
-        raise ConfigError(f"offset_frames must be a number of frames >= 0, got {n_frames!r}")
+    n_frames = _frame_count(n_frames, "offset_frames")
     for value in frames:
         if not (isinstance(value, int | float) and float(value) > 0.0):
             raise ConfigError(f"wander correlation times must be > 0 frames, got {value!r}")
