@@ -224,7 +224,8 @@ def odometry(
         "--state-option",
         "-S",
         help="relative_state option key=value for the full state (repeatable), e.g. "
-        "angular_acceleration=adaptive, drift=map, n_mean_motion=0.0011, acceleration=1e-4.",
+        "angular_acceleration=adaptive, drift=offset (a tumbling target at a hold point), "
+        "n_mean_motion=0.0011, acceleration=1e-4.",
     ),
     rrd: Path = typer.Option(
         None,
