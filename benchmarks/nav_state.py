@@ -5,12 +5,13 @@
     python benchmarks/nav_state.py --out bench/nav --compare suite   # both process noises
     python benchmarks/nav_state.py --out bench/nav --seeds 20 -S drift=map  # relative_state option
 
-Runs ``relnav`` on the navigation suite's tumbling sequences (simulated once into
-``OUT/sequences`` by ``benchmarks/nav_suite.py``'s definitions), feeds its poses to paper 2's
-twistor UKF (:func:`relnav.navigation.state.relative_state`) and prints, after the first 30 % of
-the frames (convergence): the angular-rate error (median, 95th percentile, max, deg/s), the
-attitude/position/velocity RMS errors, and the mean NEES of the full 12-dim state and of its
-rates (velocity + angular rate) beside their 95 % bands.
+Runs ``relnav`` (given the suite's mission input, the target's orbit ``nav_suite.MISSION``;
+``-O orbit_mean_motion=0`` runs without it) on the navigation suite's tumbling sequences
+(simulated once into ``OUT/sequences`` by ``benchmarks/nav_suite.py``'s definitions), feeds its
+poses to paper 2's twistor UKF (:func:`relnav.navigation.state.relative_state`) and prints, after
+the first 30 % of the frames (convergence): the angular-rate error (median, 95th percentile,
+max, deg/s), the attitude/position/velocity RMS errors, and the mean NEES of the full 12-dim
+state and of its rates (velocity + angular rate) beside their 95 % bands.
 
 With ``--seeds N`` each sequence is simulated again with N noise seeds (1000 … 1000 + N − 1;
 same target, path and sensor) and the NEES is tested as a Monte Carlo test should be: per time
@@ -58,7 +59,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, sequence_names, suite
+from nav_suite import MISSION, holdout, sequence_names, suite
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -107,7 +108,7 @@ def track(
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(folder)
-    run = run_sequence(seq, "relnav", **(options or {}))
+    run = run_sequence(seq, "relnav", **{**MISSION, **(options or {})})
     if variants is None:
         variants = [{**(state or {}), "process_noise": p} for p in process_noises]
     out = [relative_state(run, gt_poses=seq.gt_poses, **v) for v in variants]
@@ -276,7 +277,7 @@ def report_error_structure(name: str, folders: list[Path], opts: dict[str, str])
     offsets, wander, axes, walk = [], [], [], []
     for folder in folders:
         seq = ScanSequence(folder)
-        run = run_sequence(seq, "relnav", **opts)
+        run = run_sequence(seq, "relnav", **{**MISSION, **opts})
         steps = [StateRecord.from_step(st) for st in run.steps]
         # the map's frame in the target's: [ρ (m), φ (rad)], target axes
         E = np.array(
@@ -344,7 +345,7 @@ def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: di
     start = [float(state.get(k, 1.0)) for k in NOISE_SCALES]
     runs = []
     for folder in simulate_seeds(out, name, seeds):
-        run = run_sequence(ScanSequence(folder), "relnav", **opts)
+        run = run_sequence(ScanSequence(folder), "relnav", **{**MISSION, **opts})
         # the compact records the relative state needs, not the whole run
         steps = [StateRecord.from_step(s) for s in run.steps]
         runs.append(SimpleNamespace(steps=steps, timestamps=run.timestamps, method=run.method))

@@ -212,3 +212,67 @@ def test_a_skipped_frame_keeps_times_and_poses_aligned():
     poses = nav.finalize()
     assert len(poses) == len(nav._times) == 14
     assert np.all(np.isfinite(poses)) and nav.orbit is not None
+
+
+def test_orbit_report_rebuilds_the_applied_turns():
+    """An applied correction's report carries the centre and the per-frame turns, and
+    orbit_turns rebuilds from it the transforms that took the poses to the corrected ones; no
+    turns for a correction that was not applied."""
+    from relnav.navigation.orbit import orbit_turns
+
+    rng = np.random.default_rng(0)
+    pts, nrm = _body_of_revolution(rng)
+    truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]))
+    est = _lagging(truth, 0.25, rng)
+    out, info = correct_azimuth(est, t, pts, nrm, N_LEO)
+    assert info.applied, info.reason
+    G = orbit_turns(info.as_dict())
+    assert G is not None and G.shape == (len(est), 4, 4)
+    np.testing.assert_allclose(G @ est, out, atol=1e-9)
+    _, kept = correct_azimuth(truth, t, pts, nrm, N_LEO)
+    assert not kept.applied and orbit_turns(kept.as_dict()) is None
+    assert "correction_deg" not in kept.as_dict()
+
+
+def test_relative_state_observes_the_orbit_corrected_azimuth(rng):
+    """relative_state turns each frame by the run's recorded orbit correction (pose and
+    information, StateRecord.turned) before the filter, unless orbit_azimuth=False; the
+    information is turned as a left perturbation is (Ad_G)."""
+    from types import SimpleNamespace
+
+    from relnav.geometry.se3 import adjoint, invert
+    from relnav.navigation.orbit import orbit_turns
+    from relnav.navigation.state import StateRecord, relative_state
+
+    poses = []
+    for k in range(6):
+        T = np.eye(4)
+        T[:3, :3] = rotvec_to_matrix([0.0, 0.0, 0.02 * k])
+        T[:3, 3] = [40.0, 2.0 * k, 1.0]
+        poses.append(T)
+    A = rng.normal(size=(6, 6))
+    H = A @ A.T + np.eye(6)
+    frames = [StateRecord("first", poses[0], H, None)] + [
+        StateRecord("ok", T, H, 1e-4 * np.eye(6)) for T in poses[1:]
+    ]
+    angles = [0.0, 5.0, 10.0, 15.0, 20.0, 25.0]
+    report = {"applied": True, "axis": [0.0, 0.0, 1.0], "center": [1.0, 0.0, 0.0],
+              "correction_deg": angles}  # fmt: skip
+    run = SimpleNamespace(
+        steps=frames,
+        timestamps=np.arange(6.0),
+        method="relnav",
+        options={"finalize": {"orbit": report}},
+    )
+    res = relative_state(run)
+    plain = relative_state(run, orbit_azimuth=False)
+    G = orbit_turns(report)
+    for k in range(6):
+        np.testing.assert_allclose(res.observed[k, :3], invert(G[k] @ poses[k])[:3, 3], atol=1e-9)
+        np.testing.assert_allclose(plain.observed[k, :3], invert(poses[k])[:3, 3], atol=1e-9)
+    turned = frames[3].turned(G[3])
+    Ad = adjoint(G[3])
+    np.testing.assert_allclose(
+        np.linalg.inv(turned.information), Ad @ np.linalg.inv(H) @ Ad.T, rtol=1e-9, atol=1e-12
+    )
+    np.testing.assert_array_equal(turned.step_covariance, frames[3].step_covariance)

@@ -49,7 +49,7 @@ from scipy.optimize import least_squares
 from relnav.geometry.rotations import rotvec_to_matrix
 from relnav.navigation.symmetry import symmetry_axis
 
-__all__ = ["OrbitCorrection", "correct_azimuth"]
+__all__ = ["OrbitCorrection", "correct_azimuth", "orbit_turns"]
 
 _MIN_FRAMES = 8
 _NEAR_AXIS = 0.2  # frames closer to the axis than this fraction of the median radius
@@ -93,8 +93,9 @@ class OrbitCorrection:
     correction_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (the largest turn instead of the per-frame turns)."""
-        return {
+        """JSON-ready summary; when applied, also the centre and the per-frame turns (what
+        :func:`orbit_turns` rebuilds the turns from)."""
+        out: dict[str, Any] = {
             "applied": self.applied,
             "reason": self.reason,
             "axis": None if self.axis is None else [float(x) for x in self.axis],
@@ -104,6 +105,32 @@ class OrbitCorrection:
             "excess": float(self.excess),
             "max_correction_deg": float(np.max(np.abs(self.correction_deg), initial=0.0)),
         }
+        if self.applied and self.center is not None:
+            out["center"] = [float(x) for x in self.center]
+            out["correction_deg"] = [float(x) for x in self.correction_deg]
+        return out
+
+
+def orbit_turns(report: dict[str, Any]) -> np.ndarray | None:
+    """The per-frame turns ``G_k`` ``(N, 4, 4)`` of an applied correction, from its
+    :meth:`OrbitCorrection.as_dict` (``T' = G_k T``: a rotation by the frame's correction about
+    the axis through the orbit's centre, target frame); None when none was applied."""
+    if not report.get("applied") or "correction_deg" not in report:
+        return None
+    a = np.asarray(report["axis"], dtype=np.float64)
+    c = np.asarray(report["center"], dtype=np.float64)
+    angles = np.radians(np.asarray(report["correction_deg"], dtype=np.float64))
+    return _turns(a, c, angles)
+
+
+def _turns(axis: np.ndarray, center: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rotations by ``angles`` (rad) about ``axis`` through ``center``, ``(N, 4, 4)``."""
+    G = np.tile(np.eye(4), (len(angles), 1, 1))
+    for i, angle in enumerate(angles):
+        R = rotvec_to_matrix(axis * angle)
+        G[i, :3, :3] = R
+        G[i, :3, 3] = center - R @ center
+    return G
 
 
 def _basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -240,11 +267,7 @@ def correct_azimuth(
     keep = far >= _NEAR_AXIS * float(np.median(rho))
     keep[0] = True
     d = np.interp(t, t[keep], np.unwrap(d[keep]))
-    C = out.center
-    for i in range(n):
-        R = rotvec_to_matrix(a * d[i])
-        T[i, :3, :3] = R @ T[i, :3, :3]
-        T[i, :3, 3] = R @ (T[i, :3, 3] - C) + C
+    T = _turns(a, out.center, d) @ T
     out.applied = True
     out.correction_deg = np.degrees(d)
     out.reason = (

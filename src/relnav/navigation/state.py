@@ -20,6 +20,7 @@ is observed like an ``ok`` one, its covariance already saying how little it is d
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -50,6 +51,8 @@ __all__ = [
     "scale_drift",
     "with_map_rotation_offset",
 ]
+
+log = logging.getLogger(__name__)
 
 _UNSEEN_VAR = 1e6  # variance (m², rad²) given to directions the scan did not constrain
 # relative_state(angular_acceleration="adaptive"): shares of the torque-free bound in the bank
@@ -131,6 +134,17 @@ class StateRecord:
     step_covariance: np.ndarray | None = None
     merged: bool | None = None
 
+    def turned(self, G: np.ndarray) -> StateRecord:
+        """The frame with its pose turned in the target frame, ``T' = G T`` (``G`` ``(4, 4)``):
+        a left perturbation ``δ`` of ``T`` is ``Ad_G δ`` of ``T'``, so the information becomes
+        ``Ad_G⁻ᵀ H Ad_G⁻¹``; the step covariance (body frame) is unchanged."""
+        H = None
+        if self.information is not None:
+            A = np.linalg.inv(adjoint(np.asarray(G, dtype=float)))
+            H = A.T @ np.asarray(self.information) @ A
+        pose = np.asarray(G, dtype=float) @ self.pose
+        return StateRecord(self.status, pose, H, self.step_covariance, self.merged)
+
     @classmethod
     def from_step(cls, step: Any) -> StateRecord:
         """From an :class:`relnav.odometry.OdometryStep` of the navigator."""
@@ -163,6 +177,7 @@ def relative_state(
     drift_rotation_scale: float = 1.0,
     measurement_scale: float = 1.0,
     initial_bias: int = 0,
+    orbit_azimuth: bool = True,
     **tracker_options: Any,
 ) -> TrackResult:
     """Estimate the target's relative state from a navigator run.
@@ -270,6 +285,15 @@ def relative_state(
         own and the later ones the scaled drift. Not the default: the rate block stays below
         1 whatever the start-up, and envisat-tumble-64's and iridium-helical-64's attitude get
         worse (1.06 → 2.36°, 13.9 → 17.1°; ``docs/results/nav/state_initial_bias.md``).
+    orbit_azimuth : bool
+        **[interpretation]** When the navigator's run took the azimuth about a body of
+        revolution's axis from the target's orbit (``run.options["finalize"]["orbit"]``,
+        :func:`relnav.navigation.orbit.correct_azimuth`), turn each frame's online pose and
+        information by that frame's correction (:meth:`StateRecord.turned`) before the filter
+        (default True), so that the state agrees with the run's trajectory. The scans' own
+        information along the azimuth stays as weak as it was. Measured (one run each, after
+        30 % of the frames): attitude error sim-orion-resample 49.0 → 2.0°, orion-inclined-64
+        27.4 → 8.8°, sim-bennu-resample 3.4 → 1.9°, the held-out orion-tilt60-64 24.2 → 14.0°.
     **tracker_options
         Passed to :class:`relnav.fusion.tracker.Tracker` (``q`` replaces the process noise above,
         ``p0``, ``omega0``, ``gate_probability`` …). With the
@@ -318,6 +342,8 @@ def relative_state(
         s if isinstance(s, StateRecord) else StateRecord.from_step(s)
         for s in (run.steps if steps is None else steps)
     ]
+    if orbit_azimuth:
+        frames = _orbit_turned(run, frames)
     noise = pose_noise(frames, frame="target" if process_noise == "physics" else "sensor")
     shares = map_drift_shares(frames, map_memory) if drift == "map" else np.ones(len(frames))
     start_up, P_start = startup_bias(frames, initial_bias, shares)
@@ -561,6 +587,21 @@ def startup_bias(
     R_st = np.asarray(steps[start_up[0]].pose)[:3, :3].T  # … and to the first update's sensor
     C[:3, :3] = R_st @ C[:3, :3] @ R_st.T
     return start_up, 0.5 * (C + C.T)
+
+
+def _orbit_turned(run: Any, frames: list[StateRecord]) -> list[StateRecord]:
+    """``frames`` turned by the run's orbit correction, if one was applied (else as given)."""
+    from relnav.navigation.orbit import orbit_turns
+
+    options = getattr(run, "options", None) or {}
+    report = options.get("finalize", {}).get("orbit") if isinstance(options, dict) else None
+    G = None if not isinstance(report, dict) else orbit_turns(report)
+    if G is None:
+        return frames
+    if len(G) != len(frames):
+        log.warning("orbit correction of %d frames for %d: not applied", len(G), len(frames))
+        return frames
+    return [f.turned(g) for f, g in zip(frames, G, strict=True)]
 
 
 def _start_up_steps(steps: Sequence[Any], n_frames: int) -> list[int]:
