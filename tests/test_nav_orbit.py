@@ -257,7 +257,7 @@ def test_relative_state_observes_the_orbit_corrected_azimuth(rng):
     ]
     angles = [0.0, 5.0, 10.0, 15.0, 20.0, 25.0]
     report = {"applied": True, "axis": [0.0, 0.0, 1.0], "center": [1.0, 0.0, 0.0],
-              "correction_deg": angles}  # fmt: skip
+              "correction_deg": angles, "misfit_m": 0.04, "scale_m": 40.0}  # fmt: skip
     run = SimpleNamespace(
         steps=frames,
         timestamps=np.arange(6.0),
@@ -276,3 +276,12 @@ def test_relative_state_observes_the_orbit_corrected_azimuth(rng):
         np.linalg.inv(turned.information), Ad @ np.linalg.inv(H) @ Ad.T, rtol=1e-9, atol=1e-12
     )
     np.testing.assert_array_equal(turned.step_covariance, frames[3].step_covariance)
+    # the orbit's azimuth (about z through the centre) is known to misfit / scale = 1 mrad:
+    # the filter's frames carry it in their information and their step covariance
+    u = np.array([0.0, -1.0, 0.0, 0.0, 0.0, 1.0])  # [c × a, a]
+    pinned = turned.pinned(u, 1e-3)
+    var = u @ np.linalg.inv(pinned.information) @ u
+    assert var <= 1e-6 < u @ np.linalg.inv(turned.information) @ u
+    ub = adjoint(invert(turned.pose)) @ u
+    assert ub @ pinned.step_covariance @ ub <= 1e-6 < ub @ turned.step_covariance @ ub
+    assert np.linalg.eigvalsh(pinned.step_covariance).min() > -1e-15

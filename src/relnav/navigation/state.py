@@ -145,6 +145,24 @@ class StateRecord:
         pose = np.asarray(G, dtype=float) @ self.pose
         return StateRecord(self.status, pose, H, self.step_covariance, self.merged)
 
+    def pinned(self, u: np.ndarray, sigma: float) -> StateRecord:
+        """The frame with one direction of its pose known to ``sigma``: ``u`` ``(6,)`` a left
+        twist of the pose (target frame, ``[ρ (m), φ (rad)]``), ``sigma`` its 1σ along ``u``
+        (units of a unit multiple of ``u``). The information gains ``u uᵀ / σ²`` and the step
+        covariance is conditioned on the same knowledge in the body frame
+        (``u_b = Ad(T⁻¹) u``: ``(C⁻¹ + u_b u_bᵀ / σ²)⁻¹``, in covariance form)."""
+        u = np.asarray(u, dtype=float)
+        w = 1.0 / float(sigma) ** 2
+        H = None if self.information is None else np.asarray(self.information) + w * np.outer(u, u)
+        C = self.step_covariance
+        if C is not None:
+            C = np.asarray(C, dtype=float)
+            ub = adjoint(invert(self.pose)) @ u
+            Cu = C @ ub
+            C = C - np.outer(Cu, Cu) / (float(ub @ Cu) + 1.0 / w)
+            C = 0.5 * (C + C.T)
+        return StateRecord(self.status, self.pose, H, C, self.merged)
+
     @classmethod
     def from_step(cls, step: Any) -> StateRecord:
         """From an :class:`relnav.odometry.OdometryStep` of the navigator."""
@@ -290,10 +308,12 @@ def relative_state(
         revolution's axis from the target's orbit (``run.options["finalize"]["orbit"]``,
         :func:`relnav.navigation.orbit.correct_azimuth`), turn each frame's online pose and
         information by that frame's correction (:meth:`StateRecord.turned`) before the filter
-        (default True), so that the state agrees with the run's trajectory. The scans' own
-        information along the azimuth stays as weak as it was. Measured (one run each, after
-        30 % of the frames): attitude error sim-orion-resample 49.0 → 2.0°, orion-inclined-64
-        27.4 → 8.8°, sim-bennu-resample 3.4 → 1.9°, the held-out orion-tilt60-64 24.2 → 14.0°.
+        (default True), so that the state agrees with the run's trajectory, and condition its
+        information and step covariance on the orbit's azimuth, known to the orbit's
+        radius/height misfit over the sensor's median distance (:meth:`StateRecord.pinned`).
+        Measured (one run each, after 30 % of the frames, ``docs/results/nav/orbit.md``):
+        attitude error sim-orion-resample 49.0 → 1.3°, orion-inclined-64 27.4 → 5.3°,
+        sim-bennu-resample 3.4 → 0.65°, the held-out orion-tilt60-64 24.2 → 7.6°.
     **tracker_options
         Passed to :class:`relnav.fusion.tracker.Tracker` (``q`` replaces the process noise above,
         ``p0``, ``omega0``, ``gate_probability`` …). With the
@@ -601,7 +621,12 @@ def _orbit_turned(run: Any, frames: list[StateRecord]) -> list[StateRecord]:
     if len(G) != len(frames):
         log.warning("orbit correction of %d frames for %d: not applied", len(G), len(frames))
         return frames
-    return [f.turned(g) for f, g in zip(frames, G, strict=True)]
+    # the orbit gives the azimuth about the axis through its centre to its misfit over the
+    # sensor's distance (rad): each frame's scan information and step are conditioned on it
+    a = np.asarray(report["axis"], dtype=float)
+    u = np.concatenate([np.cross(np.asarray(report["center"], dtype=float), a), a])
+    sigma = max(float(report["misfit_m"]) / max(float(report["scale_m"]), 1e-9), 1e-4)
+    return [f.turned(g).pinned(u, sigma) for f, g in zip(frames, G, strict=True)]
 
 
 def _start_up_steps(steps: Sequence[Any], n_frames: int) -> list[int]:
