@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from relnav.geometry.rotations import rotvec_to_matrix
-from relnav.navigation.orbit import correct_azimuth
+from relnav.navigation.orbit import correct_azimuth, orbit_turns
 
 N_LEO = 2 * math.pi / 5553.6  # rad/s
 
@@ -218,8 +218,6 @@ def test_orbit_report_rebuilds_the_applied_turns():
     """An applied correction's report carries the centre and the per-frame turns, and
     orbit_turns rebuilds from it the transforms that took the poses to the corrected ones; no
     turns for a correction that was not applied."""
-    from relnav.navigation.orbit import orbit_turns
-
     rng = np.random.default_rng(0)
     pts, nrm = _body_of_revolution(rng)
     truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]))
@@ -241,7 +239,6 @@ def test_relative_state_observes_the_orbit_corrected_azimuth(rng):
     from types import SimpleNamespace
 
     from relnav.geometry.se3 import adjoint, invert
-    from relnav.navigation.orbit import orbit_turns
     from relnav.navigation.state import StateRecord, relative_state
 
     poses = []

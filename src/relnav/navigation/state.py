@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -31,9 +31,10 @@ import numpy as np
 from relnav.errors import ConfigError
 from relnav.fusion.multiple_model import mix_tracks
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
-from relnav.geometry.rotations import matrix_to_quat
+from relnav.geometry.rotations import hat, matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.options import in_map
+from relnav.navigation.orbit import orbit_turns
 
 __all__ = [
     "StateRecord",
@@ -611,8 +612,6 @@ def startup_bias(
 
 def _orbit_turned(run: Any, frames: list[StateRecord]) -> list[StateRecord]:
     """``frames`` turned by the run's orbit correction, if one was applied (else as given)."""
-    from relnav.navigation.orbit import orbit_turns
-
     options = getattr(run, "options", None) or {}
     report = options.get("finalize", {}).get("orbit") if isinstance(options, dict) else None
     G = None if not isinstance(report, dict) else orbit_turns(report)
@@ -700,10 +699,6 @@ def with_map_rotation_offset(result: TrackResult, C_offset: np.ndarray) -> Track
     rate error ``δω = [ω̂]× ε`` (``ω̂`` the estimated rate): ``P + J C Jᵀ`` with
     ``J = [0; 0; I; [ω̂]×]`` in ``[δd, δv, δθ, δω]``. Steps without an estimate are unchanged.
     """
-    from dataclasses import replace
-
-    from relnav.geometry.rotations import hat
-
     P = np.array(result.covariance, dtype=float, copy=True)
     for k in range(len(P)):
         if np.all(np.isfinite(P[k])) and np.all(np.isfinite(result.omega[k])):
