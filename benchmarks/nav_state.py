@@ -45,7 +45,9 @@ last frame (summed step covariances).
 ``-S key=value`` passes an option to :func:`relnav.navigation.state.relative_state` (numbers
 are read as floats, ``none`` as None), e.g. ``-S drift=map``, ``-S robust_dof=5``,
 ``-S initial_bias=10`` (the start-up frames' drift as the map's initial offset) or
-``-S angular_acceleration=none`` (the torque-free bound alone instead of the adaptive bank).
+``-S angular_acceleration=none`` (the torque-free bound alone instead of the adaptive bank);
+``-S preset=hold-point`` (:data:`relnav.navigation.state.STATE_PRESETS`, the other options win
+over the preset's), ``-S torque_free_shares=1,0.1,0.01``.
 """
 
 from __future__ import annotations
@@ -104,14 +106,14 @@ def track(
     ``state``: options of ``relative_state``; ``variants``: instead of ``process_noises``, one
     relative state per dict of ``relative_state`` options."""
     from relnav.io.sequences import ScanSequence
-    from relnav.navigation.state import relative_state
+    from relnav.navigation.state import relative_state, state_options
     from relnav.odometry import run_sequence
 
     seq = ScanSequence(folder)
     run = run_sequence(seq, "relnav", **{**MISSION, **(options or {})})
     if variants is None:
         variants = [{**(state or {}), "process_noise": p} for p in process_noises]
-    out = [relative_state(run, gt_poses=seq.gt_poses, **v) for v in variants]
+    out = [relative_state(run, gt_poses=seq.gt_poses, **state_options(v)) for v in variants]
     return out if len(out) > 1 else out[0]
 
 
@@ -359,12 +361,17 @@ def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: di
     return fit["scales"]
 
 
-def _value(text: str) -> float | str | None:
-    """A ``-S`` value: ``None`` for "none", a float when it reads as one, else the string."""
+def _value(text: str) -> float | tuple[float, ...] | str | None:
+    """A ``-S`` value: ``None`` for "none", a float when it reads as one, a tuple of floats for
+    comma-separated numbers (``torque_free_shares=1,0.1,0.01``), else the string."""
     if text.lower() == "none":
         return None
     try:
         return float(text)
+    except ValueError:
+        pass
+    try:
+        return tuple(float(x) for x in text.split(",")) if "," in text else text
     except ValueError:
         return text
 

@@ -114,3 +114,25 @@ def test_a_bank_of_trackers_prefers_the_model_that_generated_the_data(tmp_path):
     rows = list(csv.DictReader(m.to_csv(tmp_path / "m.csv").open()))
     assert {"log_likelihood", "p_model0", "p_model1"} <= set(rows[0])
     assert float(rows[-1]["p_model1"]) == pytest.approx(m.model_probability[-1, 1], rel=1e-6)
+
+
+def test_an_observation_the_most_probable_member_rejects_is_no_evidence():
+    """model_probabilities(rejected=…): a step the leading member gated leaves the
+    probabilities as they were, however much better a looser member scored it; a step only a
+    trailing member gated still counts; mix_tracks reads the rejections from the statuses."""
+    L = np.array([[-1.0, -3.0], [-30.0, -2.0], [-1.0, -3.0]])  # step 1: an outlier
+    rejected = np.array([[False, False], [True, False], [False, False]])
+    plain = model_probabilities(L, floor=1e-3)
+    held = model_probabilities(L, floor=1e-3, rejected=rejected)
+    assert plain[1, 1] > 0.99  # scored like any step, the outlier hands over the bank
+    np.testing.assert_allclose(held[1], held[0])  # no evidence
+    assert held[2, 0] > held[0, 0]
+    counted = model_probabilities(L, floor=1e-3, rejected=rejected[:, ::-1])
+    np.testing.assert_allclose(counted, plain)  # the trailing member's rejection counts
+    with pytest.raises(InputError):
+        model_probabilities(L, rejected=np.zeros((2, 2), dtype=bool))
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    a = _track(3, np.zeros(3), q0, 1e-4, L[:, 0])
+    b = _track(3, np.zeros(3), q0, 1e-4, L[:, 1])
+    a.status[1] = "flagged: gated (NIS 40.0 > χ²_6(0.999))"
+    np.testing.assert_allclose(mix_tracks([a, b]).model_probability, held)

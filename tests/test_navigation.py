@@ -549,6 +549,46 @@ def test_relative_state_adaptive_bank_on_a_principal_axis_spin(tumble_run):
         relative_state(run, angular_acceleration=-1.0)
 
 
+def test_relative_state_bank_shares_floor_and_presets(tumble_run):
+    """torque_free_shares and bank_floor shape the adaptive bank; a preset expands to its
+    options with the caller's winning; bad values and unknown presets are refused."""
+    from relnav.errors import ConfigError
+    from relnav.navigation.state import (
+        STATE_PRESETS,
+        check_state_options,
+        relative_state,
+        state_options,
+    )
+
+    seq, run = tumble_run
+    res = relative_state(
+        run, angular_acceleration="adaptive", torque_free_shares=(1.0, 0.01), bank_floor=0.0
+    )
+    assert res.model_probability.shape == (len(res), 2)
+    assert res.settings["bank"] == ["torque-free bound × 1", "torque-free bound × 0.01"]
+    assert res.settings["floor"] == 0.0
+    hold = state_options({"preset": "hold-point", "bank_floor": 1e-4})
+    assert hold == {**STATE_PRESETS["hold-point"], "bank_floor": 1e-4}
+    assert state_options({"drift": "map"}) == {"drift": "map"}
+    res = relative_state(run, gt_poses=seq.gt_poses, **state_options({"preset": "hold-point"}))
+    assert res.model_probability.shape[1] == 4 and res.settings["floor"] == 1e-5
+    assert res.settings["centre_offset"] and res.settings["gate_probability"] == 0.999
+    k0 = len(res) // 3
+    err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
+    assert np.median(err) < 0.1 and np.max(err) < 0.2
+    check_state_options({"preset": "hold-point"})
+    for bad in (
+        {"preset": "orbit"},
+        {"torque_free_shares": ()},
+        {"torque_free_shares": (1.0, -0.1)},
+        {"torque_free_shares": "fast"},
+        {"bank_floor": 0.5},
+        {"bank_floor": "low"},
+    ):
+        with pytest.raises(ConfigError):
+            check_state_options({"angular_acceleration": "adaptive", **bad})
+
+
 def test_scale_drift_scales_translation_and_rotation_apart(rng):
     """scale_drift: the translation and rotation variances by their scales, the lever-arm
     correlation by the root of their product; positive semi-definite; scales 1 change nothing."""

@@ -58,9 +58,9 @@ def write_state_outputs(
     import numpy as np
 
     from relnav.cli.track import plot_track, plot_track_errors
-    from relnav.navigation.state import nees_band, relative_state
+    from relnav.navigation.state import nees_band, relative_state, state_options
 
-    result = relative_state(run, steps=steps, gt_poses=gt, **(options or {}))
+    result = relative_state(run, steps=steps, gt_poses=gt, **state_options(options or {}))
     result.to_csv(out / "state.csv")
     names = ["state.csv", plot_track(result, out / "state.png").name]
     if gt is not None:
@@ -224,8 +224,8 @@ def odometry(
         "--state-option",
         "-S",
         help="relative_state option key=value for the full state (repeatable), e.g. "
-        "angular_acceleration=adaptive, drift=offset (a tumbling target at a hold point), "
-        "n_mean_motion=0.0011, acceleration=1e-4.",
+        "preset=hold-point (the chaser holds station beside a spinning or tumbling target), "
+        "angular_acceleration=adaptive, drift=offset, n_mean_motion=0.0011, acceleration=1e-4.",
     ),
     rrd: Path = typer.Option(
         None,

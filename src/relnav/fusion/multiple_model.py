@@ -6,6 +6,11 @@ filters that differ in one modelling choice (say, how fast the target's rate may
 each update every member's probability is multiplied by the Gaussian likelihood of its
 innovation, ``N(ν; 0, S)``, and the output is the probability-weighted mixture. No truth is
 involved: the data say which model explains them.
+
+**[interpretation]** An observation the most probable member rejects (its χ² gate) is an
+outlier, not evidence: its step leaves the probabilities as they were. Scored like any other,
+one wrong scan would hand the bank to its loosest member, which then follows the outlier
+(measured on envisat-tumble-64, ``docs/results/nav/state_hold_point.md``).
 """
 
 from __future__ import annotations
@@ -24,7 +29,9 @@ __all__ = ["mix_tracks", "model_probabilities"]
 log = logging.getLogger(__name__)
 
 
-def model_probabilities(log_likelihood: np.ndarray, floor: float = 1e-3) -> np.ndarray:
+def model_probabilities(
+    log_likelihood: np.ndarray, floor: float = 1e-3, rejected: np.ndarray | None = None
+) -> np.ndarray:
     """Each member's probability after each step, from the log-likelihoods of its updates.
 
     Parameters
@@ -34,6 +41,9 @@ def model_probabilities(log_likelihood: np.ndarray, floor: float = 1e-3) -> np.n
     floor : float
         Lower bound of a member's probability (then renormalized), so that a member can take
         over again when the target's behaviour changes (0 = pure Bayes, which locks in).
+    rejected : (K, M) bool, optional
+        Where a member rejected the step's observation (gated it). A step rejected by the
+        member most probable before it carries no evidence: the probabilities stay.
 
     Returns
     -------
@@ -47,11 +57,14 @@ def model_probabilities(log_likelihood: np.ndarray, floor: float = 1e-3) -> np.n
     if not 0.0 <= floor < 1.0 / L.shape[1]:
         raise InputError(f"floor must be in [0, 1/M), got {floor!r}")
     K, M = L.shape
+    if rejected is not None and np.shape(rejected) != (K, M):
+        raise InputError(f"rejected must be {(K, M)}, got {np.shape(rejected)}")
     out = np.empty((K, M))
     logp = np.full(M, -np.log(M))
     for k in range(K):
         row = L[k]
-        if np.any(np.isfinite(row)):
+        outlier = rejected is not None and bool(rejected[k, int(np.argmax(logp))])
+        if np.any(np.isfinite(row)) and not outlier:
             logp = logp + np.where(np.isfinite(row), row, np.nanmin(row))
             logp -= logp.max()
             p = np.exp(logp)
@@ -78,6 +91,9 @@ def mix_tracks(
     floor : float
         See :func:`model_probabilities`.
 
+    An observation the most probable member rejected (status ``flagged: …``) is no evidence
+    (:func:`model_probabilities` ``rejected``).
+
     Returns
     -------
     TrackResult
@@ -98,7 +114,8 @@ def mix_tracks(
     if len(names) != M:
         raise InputError(f"{len(names)} labels for {M} tracks")
     L = np.column_stack([np.asarray(t.log_likelihood, dtype=np.float64) for t in tracks])
-    P = model_probabilities(L, floor)
+    rejected = np.array([[s.startswith("flagged") for s in t.status] for t in tracks]).T
+    P = model_probabilities(L, floor, rejected)
     best = np.argmax(P, axis=1)
     first = tracks[0]
     pos, vel = np.full((K, 3), np.nan), np.full((K, 3), np.nan)

@@ -45,7 +45,9 @@ __all__ = [
     "split_rotation_drift",
     "map_offset_rotation",
     "measurement_covariance",
+    "STATE_PRESETS",
     "startup_bias",
+    "state_options",
     "nees_band",
     "pose_noise",
     "relative_state",
@@ -58,6 +60,28 @@ log = logging.getLogger(__name__)
 _UNSEEN_VAR = 1e6  # variance (m², rad²) given to directions the scan did not constrain
 # relative_state(angular_acceleration="adaptive"): shares of the torque-free bound in the bank
 TORQUE_FREE_SHARES = (1.0, 0.1, 0.01)
+
+STATE_PRESETS: dict[str, dict[str, Any]] = {
+    "hold-point": {
+        "drift": "offset",
+        "acceleration": 1e-6,
+        "angular_acceleration": "adaptive",
+        "torque_free_shares": (1.0, 0.1, 0.01, 0.001),
+        "bank_floor": 1e-5,
+        "gate_probability": 0.999,
+    },
+}
+"""Named sets of :func:`relative_state` options (:func:`state_options`, ``-S preset=NAME``).
+
+``"hold-point"`` **[measured, chosen on envisat-tumble-64's 20 noise seeds]**: the chaser holds
+its station beside a spinning or tumbling target (the relative acceleration its guidance does
+not know is ~1e-6 m/s², not the 1e-4 of the Clohessy–Wiltshire terms of a free flight), the
+navigator's error as a map offset plus a wander (``drift="offset"``), a bank of four
+angular-acceleration levels down to 1/1000 of the torque-free bound whose members take over
+slowly (probability floor 1e-5), and a χ² gate at 0.999. Its rate and NEES on the tumbling
+sequences: ``docs/results/nav/state_hold_point.md``. Knowledge of the mission phase, not a
+default: on a helical approach the offset model follows the navigator's attitude drift.
+"""
 
 
 def _observation_jacobian(T_target_sensor: np.ndarray) -> np.ndarray:
@@ -197,6 +221,8 @@ def relative_state(
     measurement_scale: float = 1.0,
     initial_bias: int = 0,
     orbit_azimuth: bool = True,
+    torque_free_shares: Sequence[float] = TORQUE_FREE_SHARES,
+    bank_floor: float = 1e-3,
     **tracker_options: Any,
 ) -> TrackResult:
     """Estimate the target's relative state from a navigator run.
@@ -246,6 +272,13 @@ def relative_state(
         asteroid-helical-128 get worse (a member whose rate lags the truth keeps the higher
         likelihood while the observer bias absorbs its attitude error;
         ``docs/navigator.md``, "Full relative state on a tumbling target").
+    torque_free_shares : sequence of float
+        With ``angular_acceleration="adaptive"``: the bank's shares of the torque-free bound
+        (each > 0; default 1, 1/10 and 1/100).
+    bank_floor : float
+        With ``angular_acceleration="adaptive"``: the bank's probability floor
+        (:func:`relnav.fusion.multiple_model.model_probabilities`; default 1e-3, in
+        ``[0, 1/M)``): how fast a dormant member can take over.
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
         ``"step"`` (default): all of it, every frame. ``"map"`` **[interpretation]**: the
@@ -355,6 +388,15 @@ def relative_state(
         raise ConfigError(f"angular_acceleration: a number, None or 'adaptive', not {alpha!r}")
     # the bank varies the physics noise's angular acceleration: not with a caller's q
     adaptive = alpha == "adaptive" and process_noise == "physics" and "q" not in tracker_options
+    try:
+        bank_shares = tuple(float(x) for x in np.atleast_1d(torque_free_shares))
+    except (TypeError, ValueError):
+        bank_shares = ()
+    if not bank_shares or not all(np.isfinite(x) and x > 0.0 for x in bank_shares):
+        raise ConfigError(f"torque_free_shares must be numbers > 0, got {torque_free_shares!r}")
+    n_bank = len(bank_shares)
+    if not (isinstance(bank_floor, int | float) and 0.0 <= bank_floor < 1.0 / n_bank):
+        raise ConfigError(f"bank_floor must be in [0, 1/{n_bank}), got {bank_floor!r}")
     if alpha is not None and not isinstance(alpha, str):
         alpha = float(alpha)  # type: ignore[arg-type]
         if not (np.isfinite(alpha) and alpha >= 0.0):
@@ -450,12 +492,12 @@ def relative_state(
         result = tracker.run(run.timestamps, observations, truth=truth, meta=meta)
     else:
         bank = []
-        for share in TORQUE_FREE_SHARES:
+        for share in bank_shares:
             opts = {**tracker_options, "q": {**tracker_options["q"], "torque_free_share": share}}
             tracker = Tracker(filter, n_mean_motion=n_mean_motion, **opts)
             bank.append(tracker.run(run.timestamps, observations, truth=truth, meta=meta))
-        labels = [f"torque-free bound × {share:g}" for share in TORQUE_FREE_SHARES]
-        result = mix_tracks(bank, labels)
+        labels = [f"torque-free bound × {share:g}" for share in bank_shares]
+        result = mix_tracks(bank, labels, floor=bank_floor)
     if offset_mode:
         result = with_map_rotation_offset(result, map_offset_rotation(frames, offset_frames))
     return result
@@ -709,12 +751,31 @@ def with_map_rotation_offset(result: TrackResult, C_offset: np.ndarray) -> Track
     return replace(result, covariance=P)
 
 
+def state_options(options: dict[str, Any]) -> dict[str, Any]:
+    """:func:`relative_state` options with a ``preset`` name (:data:`STATE_PRESETS`) replaced
+    by its options; the caller's other options win over the preset's.
+
+    Raises
+    ------
+    ConfigError
+        An unknown preset.
+    """
+    out = dict(options)
+    name = out.pop("preset", None)
+    if name is None:
+        return out
+    if name not in STATE_PRESETS:
+        raise ConfigError(f"unknown state preset {name!r} (known: {sorted(STATE_PRESETS)})")
+    return {**STATE_PRESETS[name], **out}
+
+
 def check_state_options(options: dict[str, Any]) -> None:
     """Raise :class:`~relnav.errors.ConfigError` for options :func:`relative_state` would
     refuse (unknown names, bad values) by running it on two still frames: what a command line
     checks before a long run rather than after it."""
     if {"run", "steps", "gt_poses"} & set(options):
         raise ConfigError("run, steps and gt_poses are not options of the relative state")
+    options = state_options(options)
     frames = [StateRecord("first", np.eye(4)), StateRecord("ok", np.eye(4))]
     still = SimpleNamespace(steps=frames, timestamps=[0.0, 1.0], method="relnav")
     relative_state(still, **options)
