@@ -268,9 +268,9 @@ def relative_state(
         (one filter, as ``None``, with ``process_noise="poses"`` or a caller's ``q``). Not
         the default: over 20 noise seeds it brings envisat-tumble-64's worst rate error after
         convergence from 0.172 to 0.060 deg/s, but the held-out aura-tumble-64's 95th
-        percentile goes 0.096 → 0.155 deg/s and orion-inclined-64, sim-helical and
-        asteroid-helical-128 get worse (a member whose rate lags the truth keeps the higher
-        likelihood while the observer bias absorbs its attitude error;
+        percentile goes 0.074 → 0.181 deg/s (max 0.123 → 0.201) and orion-inclined-64,
+        sim-helical and asteroid-helical-128 get worse (a member whose rate lags the truth
+        keeps the higher likelihood while the observer bias absorbs its attitude error;
         ``docs/navigator.md``, "Full relative state on a tumbling target").
     torque_free_shares : sequence of float
         With ``angular_acceleration="adaptive"``: the bank's shares of the torque-free bound
@@ -302,6 +302,7 @@ def relative_state(
         the rates of every frame's output (rank one, along the start-up's least-constrained
         rotation). Later steps' drift drives a Gauss–Markov observer bias with correlation
         times ``wander_frames`` (translation) and ``wander_rotation_frames`` (rotation).
+        Part of the ``"hold-point"`` preset (:data:`STATE_PRESETS`).
         Not the default: it takes the observations' attitude as the map's, so where the
         navigator's attitude drifts during a helical approach the state follows it
         (iridium-helical-64 13.9 → 25.1°, voyager-helical-64 14.8 → 25.1°), where the
