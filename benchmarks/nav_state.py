@@ -30,8 +30,12 @@ options it compares the default relative state with the one given those options 
 ``--fit`` (with ``--seeds N``) first chooses the relative state's noise scales
 (``drift_scale``, ``drift_rotation_scale``, ``measurement_scale``) by the likelihood of the
 innovations on the SUITE sequence envisat-tumble-64's N runs, without ground truth
-(:func:`relnav.navigation.state.fit_noise_scales`, ~4 min for 20 runs), prints them and then
+(:func:`relnav.navigation.noise_fit.fit_noise_scales`, ~4 min for 20 runs), prints them and then
 reports both sequences with them (aura-tumble-64 is held out: only checked).
+
+``--fresh`` (with ``--seeds N``) runs the Monte Carlo on the tumbling sequences made after the
+hold-point preset was frozen (``nav_suite.tumbling_holdout``: voyager-tumble-64,
+iridium-tumble-64) instead.
 
 ``--error-structure`` (with ``--seeds N``) prints what the navigator's online pose error is
 made of on both sequences, from the truth (``T_b_m``: the map's frame in the target's): the
@@ -61,7 +65,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import MISSION, holdout, sequence_names, suite
+from nav_suite import MISSION, holdout, sequence_names, suite, tumbling_holdout
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -84,7 +88,7 @@ def simulate_seeds(out: Path, name: str, seeds: int) -> list[Path]:
     """Simulate ``name`` with noise seeds 1000 … (cached in ``out/sequences/NAME-mcS``)."""
     from relnav.sim.scenario import simulate
 
-    every = {**suite(), **holdout()}
+    every = {**suite(), **holdout(), **tumbling_holdout()}
     folders = []
     for s in range(seeds):
         d = out / "sequences" / f"{name}-mc{s}"
@@ -241,6 +245,11 @@ def main(argv: list[str] | None = None) -> int:
         help="noise scales by the innovations' likelihood on envisat-tumble-64 (with --seeds)",
     )
     p.add_argument(
+        "--fresh",
+        action="store_true",
+        help="the tumbling sequences made after the hold-point preset was frozen (with --seeds)",
+    )
+    p.add_argument(
         "--error-structure",
         action="store_true",
         help="the navigator's pose error: offset, wander, start-up axes (with --seeds)",
@@ -261,7 +270,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if a.fit:
         state = {**state, **fit_scales(a.out, TUMBLING[0], a.seeds, opts, state)}
-    for name in TUMBLING:
+    for name in list(tumbling_holdout()) if a.fresh else TUMBLING:
         folders = simulate_seeds(a.out, name, a.seeds)
         report_monte_carlo(name, [track(f, opts, state=state) for f in folders])
     return 0
@@ -340,7 +349,8 @@ def report_error_structure(name: str, folders: list[Path], opts: dict[str, str])
 def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: dict) -> dict:
     """Noise scales of maximum innovation likelihood on ``name``'s noise seeds (no truth)."""
     from relnav.io.sequences import ScanSequence
-    from relnav.navigation.state import NOISE_SCALES, StateRecord, fit_noise_scales
+    from relnav.navigation.noise_fit import NOISE_SCALES, fit_noise_scales
+    from relnav.navigation.state import StateRecord
     from relnav.odometry import run_sequence
 
     held = {k: v for k, v in state.items() if k not in NOISE_SCALES}

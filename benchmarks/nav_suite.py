@@ -159,6 +159,55 @@ def suite() -> dict[str, dict[str, Any]]:
     return _finish(s)
 
 
+def _tumble(
+    target: dict[str, Any],
+    seed: int,
+    position: tuple[float, float, float],
+    inertia: tuple[float, float, float],
+    omega0_deg_s: tuple[float, float, float],
+    initial_rpy_deg: tuple[float, float, float],
+) -> dict[str, Any]:
+    """A 64×64 flash LIDAR holding its station beside a torque-free tumbling target."""
+    return {
+        "target": target,
+        "sensors": [_flash(64)],
+        "seed": seed,
+        "frames": 200,
+        "dt": 2.0,
+        "trajectory": {"kind": "static", "params": {"position": position}},
+        "attitude": {
+            "kind": "tumble",
+            "inertia": inertia,
+            "omega0_deg_s": omega0_deg_s,
+            "initial_rpy_deg": initial_rpy_deg,
+        },
+    }
+
+
+def tumbling_holdout() -> dict[str, dict[str, Any]]:
+    """Tumbling sequences made in session 16 after the full state's hold-point preset (with
+    ``rigid_body``) was frozen, to check it once (``nav_state.py --fresh``); not part of the
+    navigator's held-out APE tables."""
+    return {
+        "voyager-tumble-64": _tumble(
+            _mesh("voyager", "voyager", 12.3),
+            41,
+            (-40.0, 5.0, -6.0),
+            (4000.0, 7000.0, 9000.0),
+            (0.6, -0.9, 0.5),
+            (15.0, 40.0, -20.0),
+        ),
+        "iridium-tumble-64": _tumble(
+            {"name": "iridium", "scale_to": 10.0},
+            42,
+            (-45.0, -5.0, 3.0),
+            (800.0, 2500.0, 2900.0),
+            (-0.4, 0.3, 1.4),
+            (-25.0, 10.0, 60.0),
+        ),
+    }
+
+
 def holdout() -> dict[str, dict[str, Any]]:
     """Sequences never used to choose parameters (checked once the suite's were frozen)."""
     s: dict[str, dict[str, Any]] = {}

@@ -573,6 +573,8 @@ def test_relative_state_bank_shares_floor_and_presets(tumble_run):
     res = relative_state(run, gt_poses=seq.gt_poses, **state_options({"preset": "hold-point"}))
     assert res.model_probability.shape[1] == 4 and res.settings["floor"] == 1e-5
     assert res.settings["centre_offset"] and res.settings["gate_probability"] == 0.999
+    # rigid_body: a spin about a fixed axis reveals no inertia, the first pass stands
+    assert res.meta["inertia_identified"] is False and res.settings["inertia"] is None
     k0 = len(res) // 3
     err = np.degrees(np.linalg.norm(res.errors()["omega"][k0:], axis=1))
     assert np.median(err) < 0.1 and np.max(err) < 0.2
@@ -584,6 +586,8 @@ def test_relative_state_bank_shares_floor_and_presets(tumble_run):
         {"torque_free_shares": "fast"},
         {"bank_floor": 0.5},
         {"bank_floor": "low"},
+        {"rigid_body": True, "filter": "ekf"},
+        {"rigid_body": True, "process_noise": "poses"},
     ):
         with pytest.raises(ConfigError):
             check_state_options({"angular_acceleration": "adaptive", **bad})
@@ -611,7 +615,8 @@ def test_relative_state_noise_scales_on_a_short_run(tumble_run):
     measurement covariance raises the likelihood of the innovations when the drift explains
     them; bad values are refused."""
     from relnav.errors import ConfigError
-    from relnav.navigation.state import StateRecord, fit_noise_scales, relative_state
+    from relnav.navigation.noise_fit import fit_noise_scales
+    from relnav.navigation.state import StateRecord, relative_state
 
     seq, run = tumble_run
     steps = [StateRecord.from_step(s) for s in run.steps]

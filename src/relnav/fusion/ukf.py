@@ -96,6 +96,7 @@ __all__ = [
     "ProcessNoise",
     "TwistorUKF",
     "UpdateInfo",
+    "euler_rates",
     "quat_delta",
 ]
 
@@ -128,6 +129,40 @@ def _correlation_times(value: Any) -> tuple[float, float] | None:
 Innovation = Literal["position+rotation", "twist"]
 CovUpdate = Literal["standard", "joseph"]
 UpdateSigma = Literal["redraw", "propagated"]
+
+
+def _inertia_tensor(value: Any) -> np.ndarray:
+    """A (3, 3) symmetric positive definite inertia scaled to ``det = 1``, or ConfigError."""
+    J = np.asarray(value, dtype=np.float64)
+    if J.shape != (3, 3) or not np.all(np.isfinite(J)) or not np.allclose(J, J.T):
+        raise ConfigError(f"inertia must be a finite symmetric (3, 3) matrix, got {value!r}")
+    lam = np.linalg.eigvalsh(J)
+    if not lam.min() > 0.0:
+        raise ConfigError(f"inertia must be positive definite, eigenvalues {lam}")
+    return J / float(np.prod(lam)) ** (1.0 / 3.0)
+
+
+def euler_rates(w: np.ndarray, J: np.ndarray, dt: float, max_step: float = 1.0) -> np.ndarray:
+    """Body rates ``(n, 3)`` rad/s after ``dt`` s of torque-free motion from ``w`` ``(n, 3)``,
+    ``ω̇ = J⁻¹((Jω) × ω)`` with the inertia ``J`` ``(3, 3)`` (classical Runge–Kutta, steps of
+    at most ``max_step`` s)."""
+    J = np.asarray(J, dtype=np.float64)
+    J_inv = np.linalg.inv(J)
+
+    def rate(x: np.ndarray) -> np.ndarray:
+        return np.cross(x @ J.T, x) @ J_inv.T
+
+    dt = max(float(dt), 0.0)
+    n = max(1, math.ceil(dt / max_step))
+    h = dt / n
+    x = np.array(w, dtype=np.float64)
+    for _ in range(n):
+        k1 = rate(x)
+        k2 = rate(x + 0.5 * h * k1)
+        k3 = rate(x + 0.5 * h * k2)
+        k4 = rate(x + h * k3)
+        x = x + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
 
 
 class TwistorUKF(PoseFilter):
@@ -220,6 +255,13 @@ class TwistorUKF(PoseFilter):
         model's one-registration error ``v_k`` is 4.6–11× its jackknife σ in position (per
         axis), and the bias variant's accumulated drift had covered part of that. Off by
         default.
+    inertia : (3, 3) array_like, optional
+        **[interpretation, not in Paper 2]** The target's inertia tensor in body axes (any
+        scale; symmetric positive definite), when known: the prediction then turns the body
+        rate by Euler's torque-free equations, ``ω̇ = J⁻¹ ((J ω) × ω)`` (:func:`euler_rates`),
+        and the attitude by the mean of the step's first and last rates; the process noise's
+        angular acceleration is what they leave out. Default None: a constant body rate. For
+        a sensor holding an inertial attitude (the body rate is then the inertial one).
     robust_dof : float, optional
         **[interpretation, not in Paper 2]** A Student-t measurement with ``robust_dof``
         degrees of freedom instead of a Gaussian (default None: Gaussian): before each update
@@ -271,6 +313,7 @@ class TwistorUKF(PoseFilter):
         bias_correlation_time: float | tuple[float, float] | None = None,
         bias_frame: Literal["sensor", "body"] = "sensor",
         merge_slots: int = 0,
+        inertia: Any = None,
         robust_dof: float | None = None,
     ) -> None:
         if robust_dof is not None and not (
@@ -278,6 +321,7 @@ class TwistorUKF(PoseFilter):
         ):
             raise ConfigError(f"robust_dof must be > 0 or None, got {robust_dof!r}")
         self.robust_dof = None if robust_dof is None else float(robust_dof)
+        self.inertia = None if inertia is None else _inertia_tensor(inertia)
         self.centre_offset = bool(centre_offset)
         self.observer_bias = bool(observer_bias)
         self.bias_correlation_time = _correlation_times(bias_correlation_time)
@@ -557,7 +601,12 @@ class TwistorUKF(PoseFilter):
         d, v, q, w = self._apply_sigma(chi)
         c = self._sigma_offset(chi)
         # propagate: attitude by body rates (right multiplication), translation by CW
-        q = _canon_q(_qmul(q, quat_delta(w, dt)))
+        if self.inertia is not None:
+            w_end = euler_rates(w, self.inertia, dt)
+            q = _canon_q(_qmul(q, quat_delta(0.5 * (w + w_end), dt)))
+            w = w_end
+        else:
+            q = _canon_q(_qmul(q, quat_delta(w, dt)))
         s = np.concatenate([d, v], axis=1) @ self.dynamics.stm(dt).T
         d, v = s[:, :3], s[:, 3:]
         d_m = self.Wm @ d
@@ -781,6 +830,7 @@ class TwistorUKF(PoseFilter):
             bias_correlation_time=self.bias_correlation_time,
             bias_frame=self.bias_frame,
             merge_slots=self.merge_slots,
+            inertia=None if self.inertia is None else self.inertia.tolist(),
             robust_dof=self.robust_dof,
         )
         return out

@@ -33,6 +33,7 @@ from relnav.fusion.multiple_model import mix_tracks
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import hat, matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
+from relnav.navigation.inertia import fit_inertia
 from relnav.navigation.options import in_map
 from relnav.navigation.orbit import orbit_turns
 
@@ -40,7 +41,6 @@ __all__ = [
     "StateRecord",
     "check_state_options",
     "drift_covariance",
-    "fit_noise_scales",
     "map_drift_shares",
     "split_rotation_drift",
     "map_offset_rotation",
@@ -60,6 +60,8 @@ log = logging.getLogger(__name__)
 _UNSEEN_VAR = 1e6  # variance (m², rad²) given to directions the scan did not constrain
 # relative_state(angular_acceleration="adaptive"): shares of the torque-free bound in the bank
 TORQUE_FREE_SHARES = (1.0, 0.1, 0.01)
+# relative_state(rigid_body=True): first-pass frames left out of the inertia fit (converging)
+RIGID_BODY_SKIP_FRAMES = 10
 
 STATE_PRESETS: dict[str, dict[str, Any]] = {
     "hold-point": {
@@ -69,6 +71,7 @@ STATE_PRESETS: dict[str, dict[str, Any]] = {
         "torque_free_shares": (1.0, 0.1, 0.01, 0.001),
         "bank_floor": 1e-5,
         "gate_probability": 0.999,
+        "rigid_body": True,
     },
 }
 """Named sets of :func:`relative_state` options (:func:`state_options`, ``-S preset=NAME``).
@@ -78,9 +81,11 @@ its station beside a spinning or tumbling target (the relative acceleration its 
 not know is ~1e-6 m/s², not the 1e-4 of the Clohessy–Wiltshire terms of a free flight), the
 navigator's error as a map offset plus a wander (``drift="offset"``), a bank of four
 angular-acceleration levels down to 1/1000 of the torque-free bound whose members take over
-slowly (probability floor 1e-5), and a χ² gate at 0.999. Its rate and NEES on the tumbling
-sequences: ``docs/results/nav/state_hold_point.md``. Knowledge of the mission phase, not a
-default: on a helical approach the offset model follows the navigator's attitude drift.
+slowly (probability floor 1e-5), a χ² gate at 0.999, and a tumbling target's inertia
+identified from a first pass (``rigid_body``, designed on aura-tumble-64; a spin keeps the
+first pass). Its rate and NEES on the tumbling sequences, and on two made after it was frozen:
+``docs/results/nav/state_hold_point.md``. Knowledge of the mission phase, not a default: on a
+helical approach the offset model follows the navigator's attitude drift.
 """
 
 
@@ -223,6 +228,7 @@ def relative_state(
     orbit_azimuth: bool = True,
     torque_free_shares: Sequence[float] = TORQUE_FREE_SHARES,
     bank_floor: float = 1e-3,
+    rigid_body: bool = False,
     **tracker_options: Any,
 ) -> TrackResult:
     """Estimate the target's relative state from a navigator run.
@@ -279,6 +285,16 @@ def relative_state(
         With ``angular_acceleration="adaptive"``: the bank's probability floor
         (:func:`relnav.fusion.multiple_model.model_probabilities`; default 1e-3, in
         ``[0, 1/M)``): how fast a dormant member can take over.
+    rigid_body : bool
+        **[interpretation]** (UKF only) Identify a tumbling target's inertia from the
+        estimated rates (:func:`relnav.navigation.inertia.fit_inertia`, after the first
+        ``RIGID_BODY_SKIP_FRAMES`` frames) and run the filter again with the rate turned by
+        Euler's torque-free equations (``TwistorUKF(inertia=J)``) and, as its angular
+        acceleration, the fit's RMS miss (one filter, no bank); on a spin, whose rate does not
+        sweep in the body, the first pass stands. ``meta`` records
+        ``inertia_identified`` and ``principal_inertia`` (ascending, ``det = 1``). The second
+        pass uses the whole run's rates: a smoothed identification, not a causal filter.
+        For a sensor holding an inertial attitude; default False.
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
         ``"step"`` (default): all of it, every frame. ``"map"`` **[interpretation]**: the
@@ -324,7 +340,8 @@ def relative_state(
     measurement_scale : float
         Scale (> 0, default 1) of each observation's covariance (the scan's ``H⁻¹`` with the
         poses' white noise). **[measured]** No setting of the three scales, fitted to the
-        innovations' likelihood without the truth (:func:`fit_noise_scales`) or to the
+        innovations' likelihood without the truth
+        (:func:`relnav.navigation.noise_fit.fit_noise_scales`) or to the
         truth's NEES, brings every block of the NEES near 3 (less drift raises the position
         and velocity blocks, but the attitude block faster), and the fitted scales make
         iridium-helical-64's attitude worse (13.9 → 22.7°;
@@ -387,6 +404,8 @@ def relative_state(
     alpha = angular_acceleration
     if isinstance(alpha, str) and alpha != "adaptive":
         raise ConfigError(f"angular_acceleration: a number, None or 'adaptive', not {alpha!r}")
+    if rigid_body and (filter != "ukf" or process_noise != "physics" or "q" in tracker_options):
+        raise ConfigError("rigid_body needs the UKF with the physics process noise (no q)")
     # the bank varies the physics noise's angular acceleration: not with a caller's q
     adaptive = alpha == "adaptive" and process_noise == "physics" and "q" not in tracker_options
     try:
@@ -487,112 +506,38 @@ def relative_state(
             "bias_correlation_time",
             (float(wander_frames) * period, float(wander_rotation_frames) * period),
         )
-    meta = {"method": run.method}
-    if not adaptive:
-        tracker = Tracker(filter, n_mean_motion=n_mean_motion, **tracker_options)
-        result = tracker.run(run.timestamps, observations, truth=truth, meta=meta)
-    else:
+    meta: dict[str, Any] = {"method": run.method}
+
+    def track(options: dict[str, Any], bank_of_levels: bool) -> TrackResult:
+        if not bank_of_levels:
+            tracker = Tracker(filter, n_mean_motion=n_mean_motion, **options)
+            return tracker.run(run.timestamps, observations, truth=truth, meta=meta)
         bank = []
         for share in bank_shares:
-            opts = {**tracker_options, "q": {**tracker_options["q"], "torque_free_share": share}}
+            opts = {**options, "q": {**options["q"], "torque_free_share": share}}
             tracker = Tracker(filter, n_mean_motion=n_mean_motion, **opts)
             bank.append(tracker.run(run.timestamps, observations, truth=truth, meta=meta))
         labels = [f"torque-free bound × {share:g}" for share in bank_shares]
-        result = mix_tracks(bank, labels, floor=bank_floor)
+        return mix_tracks(bank, labels, floor=bank_floor)
+
+    result = track(tracker_options, adaptive)
+    if rigid_body:
+        # the rates of a first pass tell the inertia of a tumbling target; a second pass
+        # turns them by Euler's equations (a spin reveals none: the first pass stands)
+        skip = min(RIGID_BODY_SKIP_FRAMES, len(result) // 2)
+        fit = fit_inertia(result.time[skip:], result.omega[skip:])
+        meta["inertia_identified"] = fit is not None
+        if fit is not None:
+            meta["principal_inertia"] = fit.principal.tolist()
+            meta["inertia_residual_rad_s2"] = fit.residual
+            # the torque-free model's own miss is the angular acceleration it leaves out
+            q2 = {**tracker_options["q"], "angular_acceleration": fit.residual}
+            q2["torque_free"] = False
+            result = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
+        result.meta.update(meta)
     if offset_mode:
         result = with_map_rotation_offset(result, map_offset_rotation(frames, offset_frames))
     return result
-
-
-NOISE_SCALES = ("drift_scale", "drift_rotation_scale", "measurement_scale")
-
-
-def fit_noise_scales(
-    runs: Sequence[Any],
-    *,
-    names: Sequence[str] = NOISE_SCALES,
-    start: Sequence[float] | None = None,
-    bounds: tuple[float, float] = (1e-3, 1e3),
-    max_evaluations: int = 60,
-    **options: Any,
-) -> dict[str, Any]:
-    """Noise scales of :func:`relative_state` that maximise its innovations' likelihood.
-
-    **[interpretation]** System identification without ground truth: the summed Gaussian
-    log-likelihood of the filter's innovations (:attr:`TrackResult.log_likelihood`, i.e. the
-    log-density of the observations under the noise model) over ``runs`` is maximised with
-    respect to the scales ``names`` (options of :func:`relative_state` taking a number > 0),
-    by Nelder–Mead on their logarithms (first simplex: the start and each scale divided by 4),
-    each kept within ``bounds``. What a user can run on
-    their own recorded runs before freezing the settings.
-
-    Parameters
-    ----------
-    runs : sequence
-        Navigator runs (what :func:`relative_state` takes as ``run``; their ``steps`` are used).
-    names : sequence of str
-        The scales to fit (default :data:`NOISE_SCALES`).
-    start : sequence of float, optional
-        Initial scales (default 1 each).
-    bounds : (float, float)
-        Smallest and largest scale.
-    max_evaluations : int
-        Function evaluations of the search (one :func:`relative_state` per run each).
-    **options
-        Further options of :func:`relative_state`, held fixed.
-
-    Returns
-    -------
-    dict
-        ``scales`` (name → value), ``log_likelihood`` (summed over the runs, at the scales),
-        ``start_log_likelihood`` (at ``start``) and ``evaluations``.
-    """
-    from scipy.optimize import minimize
-
-    names = list(names)
-    first = np.ones(len(names)) if start is None else np.asarray(start, dtype=float)
-    if first.shape != (len(names),) or not np.all(np.isfinite(first) & (first > 0.0)):
-        raise ConfigError(f"start must hold {len(names)} scales > 0, got {start!r}")
-    x0 = np.log(first)
-    lo, hi = np.log(float(bounds[0])), np.log(float(bounds[1]))
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise ConfigError(f"bounds must be 0 < low < high, got {bounds!r}")
-    check_state_options(options)
-    cache: dict[tuple[float, ...], float] = {}
-
-    def total(x: np.ndarray) -> float:
-        key = tuple(np.round(np.clip(x, lo, hi), 6))
-        if key not in cache:
-            scales = dict(zip(names, np.exp(key), strict=True))
-            ll = 0.0
-            for run in runs:
-                res = relative_state(run, **options, **scales)
-                ll += float(np.nansum(np.asarray(res.log_likelihood, dtype=float)))
-            cache[key] = ll
-        return cache[key]
-
-    ll0 = total(np.clip(x0, lo, hi))
-    # initial simplex: the start and each scale divided by 4 in turn
-    x0 = np.clip(x0, lo, hi)
-    simplex = np.vstack([x0, x0 - np.log(4.0) * np.eye(len(names))])
-    out = minimize(
-        lambda x: -total(x),
-        x0,
-        method="Nelder-Mead",
-        options={
-            "maxfev": int(max_evaluations),
-            "xatol": 0.05,
-            "fatol": 1.0,
-            "initial_simplex": simplex,
-        },
-    )
-    best = np.clip(out.x, lo, hi)
-    return {
-        "scales": {n: float(v) for n, v in zip(names, np.exp(best), strict=True)},
-        "log_likelihood": total(best),
-        "start_log_likelihood": ll0,
-        "evaluations": len(cache),
-    }
 
 
 def startup_bias(

@@ -1,0 +1,128 @@
+"""A tumbling target's inertia from its body rates (relnav.navigation.inertia) and the UKF's
+torque-free prediction (TwistorUKF(inertia=…))."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
+
+from relnav.errors import ConfigError, InputError
+from relnav.fusion.ukf import TwistorUKF, euler_rates
+from relnav.navigation.inertia import fit_inertia, rate_sweep_deg
+
+
+def _tumble(J: np.ndarray, w0: np.ndarray, t: np.ndarray) -> np.ndarray:
+    sol = solve_ivp(
+        lambda _, w: np.linalg.solve(J, np.cross(J @ w, w)),
+        (t[0], t[-1]),
+        w0,
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-13,
+    )
+    return sol.y.T
+
+
+def _body_inertia(rng) -> np.ndarray:
+    R = Rotation.random(random_state=rng.integers(1 << 31)).as_matrix()
+    return R @ np.diag([0.3, 1.8, 2.0]) @ R.T
+
+
+def test_euler_rates_is_the_torque_free_motion(rng):
+    J = _body_inertia(rng)
+    w0 = np.radians([0.4, 0.9, 1.2])
+    t = np.array([0.0, 7.0])
+    ref = _tumble(J, w0, t)[-1]
+    out = euler_rates(w0[None], J, 7.0)[0]
+    np.testing.assert_allclose(out, ref, atol=1e-9)
+    # angular momentum and energy are kept; a sphere does not turn the rate
+    assert np.linalg.norm(J @ out) == pytest.approx(np.linalg.norm(J @ w0), rel=1e-9)
+    assert out @ J @ out == pytest.approx(w0 @ J @ w0, rel=1e-9)
+    np.testing.assert_allclose(euler_rates(w0[None], np.eye(3), 7.0)[0], w0)
+
+
+def test_fit_inertia_recovers_the_shape_of_a_tumble(rng):
+    J = _body_inertia(rng)
+    t = np.arange(0.0, 400.0, 2.0)
+    w = _tumble(J, np.radians([0.3, 0.4, 1.2]), t)
+    fit = fit_inertia(t, w + rng.normal(scale=np.radians(0.005), size=w.shape))
+    assert fit is not None and fit.sweep_deg > 10.0
+    true = J / np.linalg.det(J) ** (1.0 / 3.0)
+    np.testing.assert_allclose(fit.principal, np.linalg.eigvalsh(true), rtol=0.05)
+    assert np.linalg.det(fit.inertia) == pytest.approx(1.0)
+    assert 0.0 < fit.residual < np.radians(0.002)
+    # a spin about a principal axis does not reveal it; NaN rows are skipped
+    axis = np.linalg.eigh(J)[1][:, 0]
+    spin = np.tile(np.radians(1.0) * axis, (len(t), 1))
+    assert rate_sweep_deg(spin) < 1e-6 and fit_inertia(t, spin) is None
+    w_nan = w.copy()
+    w_nan[::7] = np.nan
+    assert fit_inertia(t, w_nan) is not None
+    with pytest.raises(InputError):
+        fit_inertia(t, w[:, :2])
+    with pytest.raises(InputError):
+        fit_inertia(t, w, window_s=0.0)
+
+
+def test_ukf_inertia_option_turns_the_rate_and_is_checked(rng):
+    J = _body_inertia(rng)
+    w0 = np.radians([0.3, 0.4, 1.2])
+    tight = {"omega": 1e-7}  # the sigma points' spread would move the mean of a nonlinear step
+    ukf = TwistorUKF(dt=2.0, omega0=w0, inertia=5.0 * J, p0=tight)  # any scale
+    ukf.predict(20.0)
+    np.testing.assert_allclose(ukf.omega, _tumble(J, w0, np.array([0.0, 20.0]))[-1], atol=1e-8)
+    assert np.linalg.det(np.asarray(ukf.settings()["inertia"])) == pytest.approx(1.0)
+    still = TwistorUKF(dt=2.0, omega0=w0, p0=tight)
+    still.predict(20.0)
+    np.testing.assert_allclose(still.omega, w0)
+    assert still.settings()["inertia"] is None
+    for bad in (np.eye(2), -np.eye(3), np.array([[1.0, 0.5, 0], [0, 1, 0], [0, 0, 1]])):
+        with pytest.raises(ConfigError):
+            TwistorUKF(inertia=bad)
+
+
+def test_relative_state_rigid_body_identifies_a_tumbling_targets_inertia(rng):
+    """relative_state(rigid_body=True) on noisy poses of a torque-free tumble seen from a
+    holding sensor: the second pass knows the inertia's shape and its rate error is smaller
+    than the first pass's."""
+    from types import SimpleNamespace
+
+    from relnav.navigation.state import StateRecord, relative_state
+
+    J = np.diag([0.3, 1.8, 2.0])
+    t = np.arange(0.0, 400.0, 2.0)
+    w = _tumble(J, np.radians([0.3, 0.4, 1.2]), t)
+    R_wb = [np.eye(3)]
+    for k in range(1, len(t)):  # the body's attitude, turned by the mean rate of each step
+        dR = Rotation.from_rotvec(0.5 * (w[k - 1] + w[k]) * (t[k] - t[k - 1])).as_matrix()
+        R_wb.append(R_wb[-1] @ dR)
+    sensor = np.array([-50.0, 0.0, 5.0])
+    sig_p, sig_r = 0.01, np.radians(0.05)
+    frames, truth = [], []
+    for k, R in enumerate(R_wb):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R.T, R.T @ sensor
+        truth.append(T)
+        noisy = T.copy()
+        noisy[:3, :3] = (
+            T[:3, :3] @ Rotation.from_rotvec(rng.normal(scale=sig_r, size=3)).as_matrix()
+        )
+        noisy[:3, 3] += rng.normal(scale=sig_p, size=3)
+        H = np.diag([sig_p**-2] * 3 + [sig_r**-2] * 3)
+        frames.append(StateRecord("first" if k == 0 else "ok", noisy, H, np.eye(6) * 1e-8))
+    run = SimpleNamespace(steps=frames, timestamps=t, method="relnav")
+    gt = np.stack(truth)
+    first = relative_state(run, gt_poses=gt)
+    rigid = relative_state(run, gt_poses=gt, rigid_body=True)
+    assert rigid.meta["inertia_identified"]
+    true = np.diag(J) / np.prod(np.diag(J)) ** (1.0 / 3.0)
+    np.testing.assert_allclose(rigid.meta["principal_inertia"], true, rtol=0.1)
+    assert rigid.settings["inertia"] is not None
+    k0 = len(t) // 3
+
+    def rate_rms(res) -> float:
+        return float(np.sqrt(np.mean(np.sum(res.errors()["omega"][k0:] ** 2, axis=1))))
+
+    assert rate_rms(rigid) < 0.5 * rate_rms(first)
