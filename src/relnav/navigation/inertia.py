@@ -28,6 +28,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.integrate import trapezoid
 
 from relnav.errors import InputError
 
@@ -48,8 +49,9 @@ class InertiaFit:
     inertia : (3, 3) float64
         ``J`` in the rates' axes, symmetric positive definite, ``det J = 1``.
     residual : float
-        RMS per axis of ``ω̇ − J⁻¹((Jω) × ω)`` over the fitted rates, rad/s²: the angular
-        acceleration the torque-free model leaves out (with the rates' own noise).
+        RMS per axis, over the fit's windows, of the mean angular acceleration the torque-free
+        model misses, ``(ω_b − ω_a − ∫ J⁻¹((Jω) × ω) dt) / (t_b − t_a)``, rad/s² (with the
+        rates' own noise).
     sweep_deg : float
         How far the rate's direction swept in the body (:func:`rate_sweep_deg`), deg.
     """
@@ -137,7 +139,7 @@ def fit_inertia(
             E = np.zeros((3, 3))
             E[r, c] = E[c, r] = 1.0
             torque = np.cross(w[a : b + 1] @ E, w[a : b + 1])
-            A[:, i] = E @ (w[b] - w[a]) - np.trapezoid(torque, t[a : b + 1], axis=0)
+            A[:, i] = E @ (w[b] - w[a]) - trapezoid(torque, t[a : b + 1], axis=0)
         rows.append(A)
         spans.append((a, b))
     if len(rows) < 3:
@@ -157,6 +159,6 @@ def fit_inertia(
     miss = []
     for a, b in spans:  # the mean angular acceleration the model misses over each window
         torque = np.cross(w[a : b + 1] @ J, w[a : b + 1]) @ J_inv
-        drift = w[b] - w[a] - np.trapezoid(torque, t[a : b + 1], axis=0)
+        drift = w[b] - w[a] - trapezoid(torque, t[a : b + 1], axis=0)
         miss.append(drift / (t[b] - t[a]))
     return InertiaFit(J, float(np.sqrt(np.mean(np.square(miss)))), sweep)
