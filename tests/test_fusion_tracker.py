@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
 from relnav.fusion.tracker import (
@@ -105,7 +106,7 @@ def test_track_result_csv_and_summary(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.diff(yaw), 22.5, atol=1e-9)
     assert float(rows[-1]["wz"]) == pytest.approx(5.0, abs=0.1)
     s = res.summary()
-    assert set(s) == {"position", "velocity", "attitude", "euler", "omega"}
+    assert set(s) == {"position", "velocity", "attitude", "euler", "omega", "omega_sensor"}
     # small attitude errors: Euler-angle differences ≈ body-axis errors
     np.testing.assert_allclose(s["euler"]["rms"], s["attitude"]["rms"], atol=0.05)
 
@@ -263,3 +264,32 @@ def test_track_li_rotating_end_to_end(tmp_path: Path) -> None:
     assert np.all(np.array(s["attitude"]["max"]) < 2.0), s["attitude"]
     assert np.all(np.array(s["position"]["max"]) < 0.05), s["position"]
     assert abs(math.degrees(res.omega[-1, 2]) - 5.0) < 0.5
+
+
+def test_rate_error_in_sensor_axes_ignores_a_constant_body_frame_offset(tmp_path):
+    """errors()["omega_sensor"]: an estimate whose body axes are the true ones turned by a
+    constant ε (an uncooperative target's map) has the body-axis rate error ω − R_εᵀ ω, but the
+    same rate vector in the sensor's axes: no error there."""
+    from relnav.fusion.track_result import TrackResult, TrackTruth
+
+    K = 30
+    t = np.arange(K, dtype=float) * 2.0
+    w_true = np.radians([0.3, 0.4, 1.2])
+    R_true = [Rotation.from_rotvec(w_true * tk) for tk in t]
+    R_eps = Rotation.from_rotvec(np.radians([0.0, 0.0, 10.0]))
+    quat_est = np.stack([(R * R_eps).as_quat() for R in R_true])
+    omega_est = np.tile(R_eps.inv().apply(w_true), (K, 1))  # the same spin in turned axes
+    truth = TrackTruth(np.zeros((K, 3)), np.zeros((K, 3)), np.stack([R.as_quat() for R in R_true]),
+                       np.tile(w_true, (K, 1)))  # fmt: skip
+    res = TrackResult(
+        time=t, position=np.zeros((K, 3)), velocity=np.zeros((K, 3)), quat=quat_est,
+        omega=omega_est, covariance=np.tile(np.eye(12), (K, 1, 1)), status=["update"] * K,
+        nis=np.ones(K), observed=np.full((K, 7), np.nan), filter="ukf", settings={},
+        truth=truth,
+    )  # fmt: skip
+    e = res.errors()
+    np.testing.assert_allclose(e["omega_sensor"], 0.0, atol=1e-12)
+    body = np.degrees(np.linalg.norm(e["omega"], axis=1))
+    np.testing.assert_allclose(body, np.degrees(np.linalg.norm(w_true - omega_est[0])))
+    assert body[0] > 0.08  # |ω_xy| · 2 sin 5° = 0.087 deg/s
+    assert "err_wsx" in res.to_csv(tmp_path / "state.csv").read_text().splitlines()[0]

@@ -73,6 +73,8 @@ def write_state_outputs(
             "skip_fraction": 0.3,
             "omega_rms_deg_s": summary["omega"]["rms"],
             "omega_max_deg_s": summary["omega"]["max"],
+            "omega_sensor_rms_deg_s": summary["omega_sensor"]["rms"],
+            "omega_sensor_max_deg_s": summary["omega_sensor"]["max"],
             "attitude_rms_deg": summary["attitude"]["rms"],
             "position_rms_m": summary["position"]["rms"],
             "velocity_rms_m_s": summary["velocity"]["rms"],

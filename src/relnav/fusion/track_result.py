@@ -195,7 +195,15 @@ class TrackResult:
     def errors(self) -> dict[str, np.ndarray]:
         """Estimate minus truth per step: ``position`` (m), ``velocity`` (m/s), ``attitude``
         (rad, body rotation vector of ``R_gtᵀ R_est``), ``euler`` (rad, wrapped difference),
-        ``omega`` (rad/s); each ``(K, 3)``.
+        ``omega`` (rad/s, body axes: each rate in its own body frame), ``omega_sensor``
+        (rad/s, ``R_est ω_est − R_gt ω_gt``: the rate vectors in the sensor's axes); each
+        ``(K, 3)``.
+
+        **[interpretation]** ``omega_sensor`` compares the rate as a vector in one frame. The
+        body axes of an uncooperative target are the estimator's own (a navigator's map), so
+        a constant attitude error ``ε`` of them, already in ``attitude``, puts ``ω × ε`` into
+        the body-axis rate error a second time; in the sensor's axes it cancels. At a hold
+        point (a sensor holding an inertial attitude) it is the inertial rate's error.
 
         Raises
         ------
@@ -215,12 +223,19 @@ class TrackResult:
             att[ok] = Rotation.from_quat(dq).as_rotvec()
         de = self.euler - t.euler
         de = (de + np.pi) % (2.0 * np.pi) - np.pi
+        w_sensor = np.full((len(self), 3), np.nan)
+        both = ok & np.all(np.isfinite(t.quat), axis=1)
+        if np.any(both):
+            w_sensor[both] = Rotation.from_quat(self.quat[both]).apply(
+                self.omega[both]
+            ) - Rotation.from_quat(t.quat[both]).apply(t.omega[both])
         return {
             "position": self.position - t.position,
             "velocity": self.velocity - t.velocity,
             "attitude": att,
             "euler": de,
             "omega": self.omega - t.omega,
+            "omega_sensor": w_sensor,
         }
 
     def nees(self) -> np.ndarray:
@@ -287,14 +302,15 @@ class TrackResult:
         -------
         dict
             ``{quantity: {"rms": [x, y, z], "max": [x, y, z]}}`` with ``position`` (m),
-            ``velocity`` (m/s), ``attitude`` and ``euler`` (deg), ``omega`` (deg/s).
+            ``velocity`` (m/s), ``attitude`` and ``euler`` (deg), ``omega`` and
+            ``omega_sensor`` (deg/s).
         """
         n0 = round(skip * len(self)) if isinstance(skip, float) and skip < 1 else int(skip)
         out: dict[str, dict[str, list[float]]] = {}
         for key, e in self.errors().items():
             e = e[n0:]
             e = e[np.all(np.isfinite(e), axis=1)]
-            if key in ("attitude", "euler", "omega"):
+            if key in ("attitude", "euler", "omega", "omega_sensor"):
                 e = np.degrees(e)
             if len(e) == 0:
                 out[key] = {"rms": [math.nan] * 3, "max": [math.nan] * 3}
@@ -344,6 +360,7 @@ class TrackResult:
             put("err_v", e["velocity"])
             put("err_att_", np.degrees(e["attitude"]))
             put("err_w", np.degrees(e["omega"]))
+            put("err_ws", np.degrees(e["omega_sensor"]))
             cols["nees"] = self.nees()
         if self.noise_scale is not None:
             cols["noise_scale"] = np.asarray(self.noise_scale, dtype=np.float64)
