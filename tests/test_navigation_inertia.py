@@ -78,7 +78,7 @@ def test_ukf_inertia_option_turns_the_rate_and_is_checked(rng):
     still.predict(20.0)
     np.testing.assert_allclose(still.omega, w0)
     assert still.settings()["inertia"] is None
-    for bad in (np.eye(2), -np.eye(3), np.array([[1.0, 0.5, 0], [0, 1, 0], [0, 0, 1]])):
+    for bad in (np.eye(2), -np.eye(3), np.array([[1.0, 0.5, 0], [0, 1, 0], [0, 0, 1]]), "big"):
         with pytest.raises(ConfigError):
             TwistorUKF(inertia=bad)
 

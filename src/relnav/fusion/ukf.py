@@ -133,7 +133,10 @@ UpdateSigma = Literal["redraw", "propagated"]
 
 def _inertia_tensor(value: Any) -> np.ndarray:
     """A (3, 3) symmetric positive definite inertia scaled to ``det = 1``, or ConfigError."""
-    J = np.asarray(value, dtype=np.float64)
+    try:
+        J = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        J = np.full(1, np.nan)
     if J.shape != (3, 3) or not np.all(np.isfinite(J)) or not np.allclose(J, J.T):
         raise ConfigError(f"inertia must be a finite symmetric (3, 3) matrix, got {value!r}")
     lam = np.linalg.eigvalsh(J)
