@@ -223,20 +223,14 @@ def holdout() -> dict[str, dict[str, Any]]:
         "seed": 12,
         **_helical(58.0, 38.0, 20.0, -10.0, 1.0),
     }
-    s["aura-tumble-64"] = {
-        "target": _mesh("aura", "envisat", 16.0),
-        "sensors": [_flash(64)],
-        "seed": 13,
-        "frames": 200,
-        "dt": 2.0,
-        "trajectory": {"kind": "static", "params": {"position": (-45.0, 8.0, -4.0)}},
-        "attitude": {
-            "kind": "tumble",
-            "inertia": (17000.0, 120000.0, 125000.0),
-            "omega0_deg_s": (0.3, 0.4, 1.2),
-            "initial_rpy_deg": (30.0, -10.0, 50.0),
-        },
-    }
+    s["aura-tumble-64"] = _tumble(
+        _mesh("aura", "envisat", 16.0),
+        13,
+        (-45.0, 8.0, -4.0),
+        (17000.0, 120000.0, 125000.0),
+        (0.3, 0.4, 1.2),
+        (30.0, -10.0, 50.0),
+    )
     s["capsule-ellipse-128"] = {
         "target": {"name": "capsule", "scale_to": 6.0},
         "sensors": [_flash(128)],

@@ -98,6 +98,7 @@ __all__ = [
     "UpdateInfo",
     "euler_rates",
     "quat_delta",
+    "torque_free_acceleration",
 ]
 
 log = logging.getLogger(__name__)
@@ -145,15 +146,20 @@ def _inertia_tensor(value: Any) -> np.ndarray:
     return J / float(np.prod(lam)) ** (1.0 / 3.0)
 
 
-def euler_rates(w: np.ndarray, J: np.ndarray, dt: float, max_step: float = 1.0) -> np.ndarray:
-    """Body rates ``(n, 3)`` rad/s after ``dt`` s of torque-free motion from ``w`` ``(n, 3)``,
-    ``ω̇ = J⁻¹((Jω) × ω)`` with the inertia ``J`` ``(3, 3)`` (classical Runge–Kutta, steps of
-    at most ``max_step`` s)."""
+def torque_free_acceleration(w: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """Euler's torque-free angular acceleration ``ω̇ = J⁻¹((Jω) × ω)`` ``(n, 3)`` rad/s² of
+    body rates ``w`` ``(n, 3)`` rad/s, inertia ``J`` ``(3, 3)`` symmetric (any scale)."""
     J = np.asarray(J, dtype=np.float64)
-    J_inv = np.linalg.inv(J)
+    return np.linalg.solve(J, np.cross(w @ J, w).T).T
+
+
+def euler_rates(w: np.ndarray, J: np.ndarray, dt: float, max_step: float = 1.0) -> np.ndarray:
+    """Body rates ``(n, 3)`` rad/s after ``dt`` s of torque-free motion from ``w`` ``(n, 3)``
+    (:func:`torque_free_acceleration`, inertia ``J`` ``(3, 3)``; classical Runge–Kutta,
+    steps of at most ``max_step`` s)."""
 
     def rate(x: np.ndarray) -> np.ndarray:
-        return np.cross(x @ J.T, x) @ J_inv.T
+        return torque_free_acceleration(x, J)
 
     dt = max(float(dt), 0.0)
     n = max(1, math.ceil(dt / max_step))

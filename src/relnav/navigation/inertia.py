@@ -31,13 +31,17 @@ import numpy as np
 from scipy.integrate import trapezoid
 
 from relnav.errors import InputError
+from relnav.fusion.ukf import torque_free_acceleration
 
 __all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg"]
 
 log = logging.getLogger(__name__)
 
-# J's six entries, in the order of fit_inertia's unknowns: (row, column) of each
-_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+# J = Σ j_i E_i over fit_inertia's six unknowns J11, J22, J33, J12, J13, J23: (6, 3, 3)
+_BASIS = np.zeros((6, 3, 3))
+for _i, (_r, _c) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+    _BASIS[_i, _r, _c] = _BASIS[_i, _c, _r] = 1.0
+del _i, _r, _c
 
 
 @dataclass(frozen=True)
@@ -135,9 +139,7 @@ def fit_inertia(
         if a >= k or b <= k:
             continue
         A = np.empty((3, 6))
-        for i, (r, c) in enumerate(_ENTRIES):
-            E = np.zeros((3, 3))
-            E[r, c] = E[c, r] = 1.0
+        for i, E in enumerate(_BASIS):
             torque = np.cross(w[a : b + 1] @ E, w[a : b + 1])
             A[:, i] = E @ (w[b] - w[a]) - trapezoid(torque, t[a : b + 1], axis=0)
         rows.append(A)
@@ -145,9 +147,7 @@ def fit_inertia(
     if len(rows) < 3:
         return None
     _, _, Vt = np.linalg.svd(np.vstack(rows))
-    J = np.zeros((3, 3))
-    for value, (r, c) in zip(Vt[-1], _ENTRIES, strict=True):
-        J[r, c] = J[c, r] = value
+    J = np.tensordot(Vt[-1], _BASIS, axes=1)
     if np.trace(J) < 0.0:
         J = -J
     lam = np.linalg.eigvalsh(J)
@@ -155,10 +155,9 @@ def fit_inertia(
         log.debug("inertia fit not positive definite (eigenvalues %s)", lam)
         return None
     J = J / float(np.prod(lam)) ** (1.0 / 3.0)
-    J_inv = np.linalg.inv(J)
     miss = []
     for a, b in spans:  # the mean angular acceleration the model misses over each window
-        torque = np.cross(w[a : b + 1] @ J, w[a : b + 1]) @ J_inv
-        drift = w[b] - w[a] - trapezoid(torque, t[a : b + 1], axis=0)
+        w_dot = torque_free_acceleration(w[a : b + 1], J)
+        drift = w[b] - w[a] - trapezoid(w_dot, t[a : b + 1], axis=0)
         miss.append(drift / (t[b] - t[a]))
     return InertiaFit(J, float(np.sqrt(np.mean(np.square(miss)))), sweep)
