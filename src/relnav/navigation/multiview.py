@@ -102,6 +102,17 @@ def check_window_options(c: NavigatorConfig) -> None:
             f"method 'relnav': option init_repeat={c.init_repeat} must be 0 or more than "
             f"init_window ({c.init_window})"
         )
+    if c.reanchor_frame and (
+        c.reanchor_skip < 1
+        or c.reanchor_frame < c.reanchor_skip + 2
+        or c.reanchor_frame in (c.init_window, c.init_repeat)
+        or c.bootstrap_frames
+    ):
+        raise ConfigError(
+            f"method 'relnav': option reanchor_frame={c.reanchor_frame} must be 0 (off) or at "
+            f"least reanchor_skip + 2 ({c.reanchor_skip} + 2, reanchor_skip >= 1), differ from "
+            "init_window and init_repeat, and exclude bootstrap_frames"
+        )
     if c.init_window and c.bootstrap_frames:
         raise ConfigError(
             "method 'relnav': options init_window and bootstrap_frames exclude each other "
@@ -127,6 +138,8 @@ class WindowFrame:
         Registration points and the map subset, sensor frame, m (empty when not ``ok``).
     rng : float
         Median range of the scan, m.
+    step_cov : (6, 6) float64 or None
+        Covariance of the step that led to the frame (body frame; None for the first frame).
     """
 
     frame: int
@@ -136,6 +149,7 @@ class WindowFrame:
     P: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     Pm: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     rng: float = 1.0
+    step_cov: np.ndarray | None = None
 
 
 def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometryStep) -> None:
@@ -147,16 +161,27 @@ def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometrySte
     # ``degenerate`` over the alert limit does not take a merged scan out of the map)
     ok = P is not None and in_map(out)
     f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
+    if out.result is not None:
+        f.step_cov = out.result.info.get("step_covariance")
     if ok:
         assert P is not None
         f.P = P
         f.Pm = even_subset(P, nav.config.max_map_points)
         f.rng = max(float(np.median(np.linalg.norm(P, axis=1))), 1.0)
     nav._win.append(f)
-    if nav.n_frames - nav._f0 not in nav._win_due:
+    due = nav.n_frames - nav._f0
+    if due not in nav._win_due:
         return
     ts = time.perf_counter()
-    refine_window(nav)
+    c = nav.config
+    if due in (c.init_window, c.init_repeat):
+        refine_window(nav)
+    if due == c.reanchor_frame:
+        from relnav.navigation.anchor import reanchor  # anchor builds on this module
+
+        G = reanchor(nav)
+        if G is not None and out.result is not None:
+            out.result.info["gauge_turn"] = G  # the earlier frames' poses are G T now
     out.time_s += time.perf_counter() - ts
     if nav.n_frames - nav._f0 >= nav._win_due[-1]:
         nav._win = None
@@ -625,6 +650,40 @@ def refine_window(nav: Navigator) -> None:
         )
         log.debug("multi-view refinement of %d frames refused", len(frames))
         return
+    out = adopt_window(nav, frames, before)
+    nav.refinements.append(
+        {
+            "frames": len(frames),
+            "rounds": rounds,
+            "time_s": time.perf_counter() - t_start,
+            "accepted": True,
+            **out,
+        }
+    )
+    log.debug(
+        "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
+        len(frames),
+        rounds,
+        out["max_rotation_deg"],
+    )
+
+
+def adopt_window(
+    nav: Navigator, frames: list[WindowFrame], before: list[np.ndarray]
+) -> dict[str, float]:
+    """Make the window's new poses the navigator's (after :func:`refine_window` or
+    :func:`relnav.navigation.anchor.reanchor`): frames outside the map follow the last
+    accepted frame's change, the map is rebuilt from the new poses, the filter goes on from
+    the last one (its velocity its own, or with ``init_velocity="refined"`` the mean of the
+    refined last steps), the smoother restarts at the last frame and
+    :meth:`~relnav.navigation.navigator.Navigator.finalize` returns the new poses for the
+    window's other frames. ``before``: the poses before the change. Returns the largest
+    rotation of a pose (deg) and the χ² of the last pose's and the velocity's change against
+    the filter's covariance.
+    """
+    c = nav.config
+    assert nav.motion is not None
+    used = [f for f in frames if f.ok]
     # frames outside the map follow the last accepted frame's correction
     corr = np.eye(4)
     for f, T0 in zip(frames, before, strict=True):
@@ -669,20 +728,4 @@ def refine_window(nav: Navigator) -> None:
         )
         for f, T0 in zip(frames, before, strict=True)
     ]
-    nav.refinements.append(
-        {
-            "frames": len(frames),
-            "rounds": rounds,
-            "max_rotation_deg": max(shift),
-            "time_s": time.perf_counter() - t_start,
-            "accepted": True,
-            "velocity_chi2": chi2_v,
-            "pose_chi2": chi2_p,
-        }
-    )
-    log.debug(
-        "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
-        len(frames),
-        rounds,
-        max(shift),
-    )
+    return {"max_rotation_deg": max(shift), "velocity_chi2": chi2_v, "pose_chi2": chi2_p}

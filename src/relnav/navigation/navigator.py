@@ -170,8 +170,10 @@ class Navigator:
         self.relocalizer = Relocalizer(self) if self.config.relocalise else None
         c = self.config
         mv.check_window_options(c)
-        self._win: list[mv.WindowFrame] | None = [] if c.init_window > 0 else None
-        self._win_due = sorted({c.init_window, c.init_repeat} - {0})
+        self._win: list[mv.WindowFrame] | None = (
+            [] if c.init_window > 0 or c.reanchor_frame > 0 else None
+        )
+        self._win_due = sorted({c.init_window, c.init_repeat, c.reanchor_frame} - {0})
         self._prefix: list[np.ndarray] = []
         self.refinements: list[dict[str, Any]] = []
         self.symmetry: SymmetryAxis | None = None
@@ -734,18 +736,21 @@ class Navigator:
         gate: float,
         rng: float,
         kernel_scale: float = 1.0,
+        voxel_map: VoxelMap | None = None,
     ) -> ScanToMapFit:
         """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
         per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
         Lam)`` (left twist information, target frame); ``gate`` the pair gate (m), ``rng`` the
-        scan's median range (m, for the rotation tolerance). The solver's options come from the
+        scan's median range (m, for the rotation tolerance); ``voxel_map`` another map than
+        the navigator's (its information is then ``info``). The solver's options come from the
         configuration (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
         c = self.config
-        assert self.map is not None
-        v = self.map.voxel_size
+        target = self.map if voxel_map is None else voxel_map
+        assert target is not None
+        v = target.voxel_size
         return solve_scan_to_map(
             P,
-            self.map,
+            target,
             np.ascontiguousarray(T0),
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(Lam),
@@ -769,18 +774,25 @@ class Navigator:
         radius: float,
         primary: bool = True,
         Lam_fit: np.ndarray | None = None,
+        voxel_map: VoxelMap | None = None,
     ) -> dict[str, Any]:
         """One registration onto the map and its quality figures (``rng``: the scan's median
         range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
         under the motion model's prior). With ``repeat_refine`` the answer is refined point to
         point when the scan repeats the previous scan's surface points
         (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the
-        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``)."""
+        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
+        ``voxel_map``: register onto that map instead of the navigator's."""
         c = self.config
-        assert self.map is not None
+        target = self.map if voxel_map is None else voxel_map
+        assert target is not None
         Lf = Lam if Lam_fit is None else Lam_fit
-        fit = self.register_on_map(P, self.map.information, T_pred, T_pred, Lf, gate, rng)
-        fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lf, gate, rng, primary)
+        fit = self.register_on_map(
+            P, target.information, T_pred, T_pred, Lf, gate, rng, voxel_map=target
+        )
+        repeat_frac, repeated = float("nan"), False
+        if voxel_map is None:  # the repeated-points test compares with the navigator's map
+            fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lf, gate, rng, primary)
         n = len(P)
         if c.information == "normal":
             H_cov = normal_information(
@@ -788,9 +800,9 @@ class Navigator:
                 fit.T,
                 fit.idx,
                 fit.d2,
-                self.map.normals,
-                self.map.information,
-                self.map.inplane_sigma**2,
+                target.normals,
+                target.information,
+                target.inplane_sigma**2,
                 float(c.kernel) ** 2,
             )
         else:

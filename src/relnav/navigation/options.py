@@ -108,6 +108,14 @@ class NavigatorConfig:
         see :mod:`relnav.navigation.multiview`); keep a joint refinement only if it is more
         certain of the last pose than the filter; refine once more over the first
         ``init_repeat`` frames (0 = off; more than ``init_window``).
+    reanchor_frame, reanchor_skip, reanchor_gate :
+        **[interpretation]** Re-anchoring of the start-up (:mod:`relnav.navigation.anchor`;
+        0 = off, the default): once ``reanchor_frame`` frames are tracked, the first scan is
+        registered onto a map of the frames from ``reanchor_skip`` on, and the whole track is
+        turned in the target frame so that the first scan sits where that denser map puts
+        it, unless the correction's χ² against the start-up steps' covariance and the
+        registration's own exceeds ``reanchor_gate`` (6 dof; default 22.46, the 0.999
+        quantile). Part of the ``relnav-hold-point`` method preset.
     smooth_lag : int
         Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
         (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
@@ -486,6 +494,9 @@ class NavigatorConfig:
     init_rounds: int = 10
     init_gate: float = 3.0
     init_repeat: int = 0
+    reanchor_frame: int = 0
+    reanchor_skip: int = 5
+    reanchor_gate: float = 22.46
     init_solver: Literal["loo", "joint"] = "joint"
     init_prior: Literal["weak", "motion", "velocity"] = "motion"
     init_prior_scale: float = 1.0

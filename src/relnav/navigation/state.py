@@ -156,6 +156,10 @@ class StateRecord:
     merged : bool or None
         Whether the scan went into the map (:func:`~relnav.navigation.options.in_map`; None:
         as its status says).
+    gauge_turn : (4, 4) float64 or None
+        The turn ``G`` of the navigator's target frame made at this frame (re-anchoring,
+        :mod:`relnav.navigation.anchor`): the earlier frames' poses are ``G T`` in the frame
+        of this one's.
     """
 
     status: str
@@ -163,6 +167,7 @@ class StateRecord:
     information: np.ndarray | None = None
     step_covariance: np.ndarray | None = None
     merged: bool | None = None
+    gauge_turn: np.ndarray | None = None
 
     def turned(self, G: np.ndarray) -> StateRecord:
         """The frame with its pose turned in the target frame, ``T' = G T`` (``G`` ``(4, 4)``):
@@ -173,7 +178,7 @@ class StateRecord:
             A = np.linalg.inv(adjoint(np.asarray(G, dtype=float)))
             H = A.T @ np.asarray(self.information) @ A
         pose = np.asarray(G, dtype=float) @ self.pose
-        return StateRecord(self.status, pose, H, self.step_covariance, self.merged)
+        return replace(self, pose=pose, information=H)
 
     def pinned(self, u: np.ndarray, sigma: float) -> StateRecord:
         """The frame with one direction of its pose known to ``sigma``: ``u`` ``(6,)`` a left
@@ -191,7 +196,7 @@ class StateRecord:
             Cu = C @ ub
             C = C - np.outer(Cu, Cu) / (float(ub @ Cu) + 1.0 / w)
             C = 0.5 * (C + C.T)
-        return StateRecord(self.status, self.pose, H, C, self.merged)
+        return replace(self, information=H, step_covariance=C)
 
     @classmethod
     def from_step(cls, step: Any) -> StateRecord:
@@ -203,6 +208,7 @@ class StateRecord:
             info.get("information"),
             info.get("step_covariance"),
             in_map(step),
+            info.get("gauge_turn"),
         )
 
 
@@ -425,6 +431,7 @@ def relative_state(
         s if isinstance(s, StateRecord) else StateRecord.from_step(s)
         for s in (run.steps if steps is None else steps)
     ]
+    frames = _gauge_turned(frames)
     if orbit_azimuth:
         frames = _orbit_turned(run, frames)
     noise = pose_noise(frames, frame="target" if process_noise == "physics" else "sensor")
@@ -533,7 +540,19 @@ def relative_state(
             # the torque-free model's own miss is the angular acceleration it leaves out
             q2 = {**tracker_options["q"], "angular_acceleration": fit.residual}
             q2["torque_free"] = False
-            result = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
+            try:
+                second = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
+                second, why = None, f"{type(e).__name__}: {e}"
+            else:
+                finite = np.all(np.isfinite(second.omega)) and np.all(np.isfinite(second.quat))
+                why = "" if finite else "non-finite states"
+            if second is None or why:
+                # Euler's equations with a wild fit can diverge: the first pass stands
+                log.warning("rigid body: second pass refused (%s); first pass kept", why)
+                meta["inertia_rejected"] = why
+            else:
+                result = second
         result.meta.update(meta)
     if offset_mode:
         result = with_map_rotation_offset(result, map_offset_rotation(frames, offset_frames))
@@ -596,6 +615,18 @@ def startup_bias(
     R_st = np.asarray(steps[start_up[0]].pose)[:3, :3].T  # … and to the first update's sensor
     C[:3, :3] = R_st @ C[:3, :3] @ R_st.T
     return start_up, 0.5 * (C + C.T)
+
+
+def _gauge_turned(frames: list[StateRecord]) -> list[StateRecord]:
+    """``frames`` with each one before a navigator's turn of its target frame (``gauge_turn``)
+    turned by it, so that all are in the last frame's target frame: what a causal filter
+    restarted on its buffer at the turn would see."""
+    out = list(frames)
+    for k, f in enumerate(frames):
+        if f.gauge_turn is not None:
+            G = np.asarray(f.gauge_turn, dtype=float)
+            out[:k] = [g.turned(G) for g in out[:k]]
+    return out
 
 
 def _orbit_turned(run: Any, frames: list[StateRecord]) -> list[StateRecord]:
