@@ -38,6 +38,7 @@ import numpy as np
 
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
+from relnav.navigation.gicp import solve_scan_to_map
 from relnav.navigation.multiview import adopt_window
 from relnav.navigation.navigator import _rms_radius
 
@@ -96,6 +97,21 @@ def reanchor(nav: Navigator) -> np.ndarray | None:
         nav.refinements.append(record | {"reason": "registration unusable"})
         return None
     xi = log_se3(fit["T"] @ invert(first.pose))  # left twist, target frame
+    # the first scan where the start-up put it, on the same map and kernel
+    at = solve_scan_to_map(
+        first.P,
+        m,
+        np.ascontiguousarray(first.pose),
+        np.ascontiguousarray(first.pose),
+        np.zeros((6, 6)),
+        3.0 * st,
+        float(c.kernel),
+        0,
+        0.0,
+        0.0,
+        c0=float(c.kernel),
+    )
+    rms_before = math.sqrt(at.swd / at.sw) if at.sw > 0 else float("inf")
     early = [f for f in used[1:] if f.frame - first.frame <= c.reanchor_skip]
     C_chain = start_up_covariance([f.pose for f in early], [f.step_cov for f in early])
     H = np.asarray(fit["H"]) / fit["var_factor"]
@@ -103,10 +119,23 @@ def reanchor(nav: Navigator) -> np.ndarray | None:
         chi2 = float(xi @ np.linalg.solve(C_chain + np.linalg.inv(H), xi))
     except np.linalg.LinAlgError:
         chi2 = float("inf")
-    record |= {"chi2": chi2, "rms": fit["rms"], "overlap": fit["overlap"]}
+    # likelihood ratio of the two placements: the fit's gain over what six free parameters
+    # take from noise alone (≈ χ²₆)
+    gain = fit["n_pairs"] * (rms_before**2 - fit["rms"] ** 2) / max(fit["rms"] ** 2, 1e-12)
+    record |= {
+        "chi2": chi2,
+        "gain_chi2": gain,
+        "rms": fit["rms"],
+        "rms_before": rms_before,
+        "overlap": fit["overlap"],
+    }
     if not chi2 <= c.reanchor_gate:
         log.debug("re-anchoring refused: χ² %.1f > %.1f", chi2, c.reanchor_gate)
         nav.refinements.append(record | {"reason": "inconsistent with the start-up"})
+        return None
+    if not gain > c.reanchor_gate:
+        log.debug("re-anchoring refused: fit gain χ² %.1f <= %.1f", gain, c.reanchor_gate)
+        nav.refinements.append(record | {"reason": "no better fit"})
         return None
     g = log_se3(first.pose @ invert(fit["T"]))
     before = [f.pose.copy() for f in frames]
