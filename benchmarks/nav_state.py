@@ -4,6 +4,8 @@
     python benchmarks/nav_state.py --out bench/nav --seeds 20   # Monte Carlo over noise seeds
     python benchmarks/nav_state.py --out bench/nav --compare suite   # both process noises
     python benchmarks/nav_state.py --out bench/nav --seeds 20 -S drift=map  # relative_state option
+    python benchmarks/nav_state.py --out bench/nav --seeds 20 --method relnav-tumbling \
+        -S preset=hold-point                                        # the tumbling presets
 
 Runs ``relnav`` (given the suite's mission input, the target's orbit ``nav_suite.MISSION``;
 ``-O orbit_mean_motion=0`` runs without it) on the navigation suite's tumbling sequences
@@ -110,6 +112,7 @@ def track(
     relative state from its poses, one per ``process_noises`` (a list) or the first alone;
     ``state``: options of ``relative_state``; ``variants``: instead of ``process_noises``, one
     relative state per dict of ``relative_state`` options."""
+    from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import relative_state, state_options
     from relnav.odometry import run_sequence
@@ -119,6 +122,9 @@ def track(
     if variants is None:
         variants = [{**(state or {}), "process_noise": p} for p in process_noises]
     out = [relative_state(run, gt_poses=seq.gt_poses, **state_options(v)) for v in variants]
+    m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
+    for r in out:  # the navigator's own trajectory error, for the reports
+        r.meta["navigator_ape"] = (m["ape_trans_rmse"], m["ape_rot_rmse_deg"])
     return out if len(out) > 1 else out[0]
 
 
@@ -209,6 +215,12 @@ def report_monte_carlo(name: str, results: list) -> None:
     inside = float(np.mean((per_step >= lo) & (per_step <= hi)))
     pooled = np.nanmean(B, axis=(0, 1))
     print(f"{name}: {n} noise seeds, steps {k0}-{len(results[0]) - 1}")
+    ape = np.array([r.meta.get("navigator_ape", (np.nan, np.nan)) for r in results])
+    print(
+        f"  navigator APE (all frames) m: median {np.median(ape[:, 0]):.2f}  mean "
+        f"{np.mean(ape[:, 0]):.2f}  max {np.max(ape[:, 0]):.2f}; rotation deg: median "
+        f"{np.median(ape[:, 1]):.2f}  max {np.max(ape[:, 1]):.2f}"
+    )
     for label, x in (("body axes", w), ("sensor axes", w_sensor)):
         print(
             f"  angular-rate error deg/s, {label} (all runs): median {np.median(x):.3f}  p95 "
@@ -236,6 +248,11 @@ def main(argv: list[str] | None = None) -> int:
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
     p.add_argument(
+        "--method",
+        default="relnav",
+        help="the navigator or one of its method presets (relnav-tumbling); -O options win",
+    )
+    p.add_argument(
         "--compare",
         choices=["suite", "holdout"],
         help="process noise 'poses' → 'physics' on every sequence (one run each)",
@@ -259,7 +276,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the navigator's pose error: offset, wander, start-up axes (with --seeds)",
     )
     a = p.parse_args(argv)
-    opts = dict(kv.split("=", 1) for kv in a.options)
+    from relnav.odometry.presets import resolve_method
+
+    method, opts, _ = resolve_method(a.method, dict(kv.split("=", 1) for kv in a.options))
+    if method != "relnav":
+        p.error(f"--method {a.method}: not the navigator ({method})")
     state = {k: _value(v) for k, v in (kv.split("=", 1) for kv in a.state)}
     if a.compare:
         report_compare(a.out, a.compare, opts, state)

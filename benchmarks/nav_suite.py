@@ -185,9 +185,10 @@ def _tumble(
 
 
 def tumbling_holdout() -> dict[str, dict[str, Any]]:
-    """Tumbling sequences made in session 16 after the full state's hold-point preset (with
-    ``rigid_body``) was frozen, to check it once (``nav_state.py --fresh``); not part of the
-    navigator's held-out APE tables."""
+    """Tumbling sequences made after a configuration was frozen, to check it once
+    (``nav_state.py --fresh``): voyager and iridium in session 16 after the full state's
+    hold-point preset (with ``rigid_body``), orion, eros and capsule in session 17 after the
+    ``relnav-tumbling`` method preset; not part of the navigator's held-out APE tables."""
     return {
         "voyager-tumble-64": _tumble(
             _mesh("voyager", "voyager", 12.3),
@@ -204,6 +205,32 @@ def tumbling_holdout() -> dict[str, dict[str, Any]]:
             (800.0, 2500.0, 2900.0),
             (-0.4, 0.3, 1.4),
             (-25.0, 10.0, 60.0),
+        ),
+        # made in session 17 after the ``relnav-tumbling`` method preset (curved patches and the
+        # start-up's re-anchoring) and the hold-point preset's ``wander_frames`` were frozen
+        "orion-tumble-64": _tumble(
+            _mesh("orion", "capsule", 8.0),
+            43,
+            (-38.0, 4.0, 5.0),
+            (6000.0, 6200.0, 4000.0),
+            (0.8, 0.2, 1.0),
+            (40.0, -15.0, 10.0),
+        ),
+        "eros-tumble-64": _tumble(
+            _mesh("eros", "asteroid", 15.0),
+            44,
+            (-42.0, -6.0, -3.0),
+            (300.0, 1200.0, 1300.0),
+            (0.5, -0.7, 0.4),
+            (-10.0, 25.0, 70.0),
+        ),
+        "capsule-tumble-64": _tumble(
+            {"name": "capsule", "scale_to": 6.0},
+            45,
+            (-36.0, 3.0, -4.0),
+            (2500.0, 2600.0, 1800.0),
+            (-0.3, 0.9, -0.6),
+            (5.0, -35.0, 20.0),
         ),
     }
 

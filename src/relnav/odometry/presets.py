@@ -54,6 +54,12 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
         "HoD-S with relnav's extensions: GCC seeded from every correspondence, SVD, "
         "point-to-plane ICP refinement, 15° innovation gate (the demo's 'extended')",
     ),
+    "relnav-tumbling": MethodPreset(
+        NAVIGATOR_METHOD,
+        {"surface": "quadric", "reanchor_frame": 20},
+        "relnav's navigator for a turning target seen by a sparse flash: curved map patches and "
+        "the start-up re-anchored on the map of frames 5-20 (docs/navigator.md)",
+    ),
 }
 """Preset name → :class:`MethodPreset`."""
 

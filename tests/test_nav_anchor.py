@@ -1,0 +1,182 @@
+"""Re-anchoring of the navigator's start-up (``reanchor_frame``, :mod:`relnav.navigation.anchor`):
+the gauge error it removes on a tumbling target, its refusal without evidence, the target-frame
+turn handed to the relative state, and option checking."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from relnav.errors import ConfigError
+from relnav.geometry.lie import exp_se3
+from relnav.geometry.se3 import invert
+from relnav.io.sequences import ScanSequence
+from relnav.navigation import Navigator
+from relnav.navigation import state as state_module
+from relnav.navigation.state import StateRecord, relative_state
+from relnav.odometry import run_sequence
+from relnav.odometry.presets import resolve_method
+from relnav.sim.scenario import simulate
+
+FRAMES = 30
+
+
+def _hold_point(name: str, seed: int, attitude: dict) -> dict:
+    """A 64×64 flash LIDAR (2 cm noise) holding 40 m from a 12 m satellite, 2 s frames."""
+    return {
+        "name": name,
+        "seed": seed,
+        "frames": FRAMES,
+        "dt": 2.0,
+        "format": "npy",
+        "target": {"name": "voyager", "scale_to": 12.3},
+        "sensors": [
+            {
+                "preset": "goldeneye",
+                "name": "flash",
+                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
+            }
+        ],
+        "trajectory": {"kind": "static", "params": {"position": (-40.0, 5.0, -6.0)}},
+        "attitude": attitude,
+    }
+
+
+TUMBLE = {
+    "kind": "tumble",
+    "inertia": (4000.0, 7000.0, 9000.0),
+    "omega0_deg_s": (0.6, -0.9, 0.5),
+    "initial_rpy_deg": (15.0, 40.0, -20.0),
+}
+
+
+@pytest.fixture(scope="module")
+def tumble_seq(tmp_path_factory):
+    """The satellite tumbling at ~1.2°/s (2.4° per frame)."""
+    out = tmp_path_factory.mktemp("anchor") / "tumble"
+    simulate(_hold_point("anchor-tumble", 3, TUMBLE), out)
+    return ScanSequence(out)
+
+
+@pytest.fixture(scope="module")
+def still_seq(tmp_path_factory):
+    """The same view of a still satellite: nothing for a re-anchoring to correct."""
+    out = tmp_path_factory.mktemp("anchor") / "still"
+    simulate(_hold_point("anchor-still", 5, {"kind": "static"}), out)
+    return ScanSequence(out)
+
+
+def _attitude_errors_deg(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    out = []
+    for E, G in zip(est, gt, strict=True):
+        D = invert(G) @ E
+        out.append(math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1))))
+    return np.array(out)
+
+
+def _reanchor_record(seq: ScanSequence, **options) -> tuple[dict, object]:
+    nav = Navigator(initial_pose=seq.gt_poses[0], **options)
+    steps = [nav.register_frame(seq[k]) for k in range(len(seq))]
+    records = [r for r in nav.refinements if r.get("kind") == "reanchor"]
+    assert len(records) == 1
+    return records[0], steps
+
+
+def test_reanchoring_removes_the_start_up_turn_of_a_tumbling_target(tumble_seq):
+    """The start-up's error is a turn of the whole map; the first scan on the later map finds
+    it: the attitude error of the frames after the re-anchoring falls below half."""
+    gt = tumble_seq.gt_poses
+    plain = run_sequence(tumble_seq, "relnav", surface="quadric")
+    anchored = run_sequence(tumble_seq, "relnav", surface="quadric", reanchor_frame=20)
+    before = _attitude_errors_deg(plain.poses, gt)[20:].mean()
+    after = _attitude_errors_deg(anchored.poses, gt)[20:].mean()
+    assert before > 3.0  # the start-up error the option is for
+    assert after < 0.5 * before
+    np.testing.assert_allclose(anchored.poses[0], gt[0])  # the anchor stays
+
+
+def test_reanchoring_records_the_turn_for_the_relative_state(tumble_seq):
+    rec, steps = _reanchor_record(tumble_seq, surface="quadric", reanchor_frame=20)
+    assert rec["accepted"] and rec["chi2"] <= 22.46 and rec["gain_chi2"] > 22.46
+    assert rec["rms"] < rec["rms_before"]
+    turned = [k for k, s in enumerate(steps) if s.result and "gauge_turn" in s.result.info]
+    assert turned == [19]  # the window's 20th frame
+    G = steps[19].result.info["gauge_turn"]
+    assert G.shape == (4, 4) and np.allclose(G[3], [0, 0, 0, 1])
+    angle = math.degrees(math.acos(np.clip((np.trace(G[:3, :3]) - 1) / 2, -1, 1)))
+    assert abs(angle - rec["rotation_deg"]) < 1e-6 and angle > 1.0
+
+
+def test_reanchoring_is_refused_without_a_better_fit(still_seq):
+    """A still target: the first scan fits the later map where it is, so nothing is turned."""
+    rec, steps = _reanchor_record(still_seq, reanchor_frame=20)
+    assert not rec["accepted"]
+    assert rec["reason"] in ("no better fit", "inconsistent with the start-up")
+    assert all("gauge_turn" not in (s.result.info if s.result else {}) for s in steps)
+
+
+def test_gauge_turn_moves_the_earlier_frames_into_the_later_target_frame():
+    """``relative_state`` sees one target frame: the frames before a turn are turned by it."""
+    G = exp_se3(np.array([0.1, -0.2, 0.3, 0.02, -0.01, 0.03]))
+    poses = [exp_se3(np.array([k, 0.0, 0.0, 0.0, 0.0, 0.01 * k])) for k in range(4)]
+    H = np.eye(6)
+    frames = [StateRecord("ok", T, H) for T in poses]
+    frames[2] = StateRecord("ok", poses[2], H, gauge_turn=G)
+    out = state_module._gauge_turned(frames)
+    for k in (0, 1):
+        np.testing.assert_allclose(out[k].pose, G @ poses[k])
+        assert not np.allclose(out[k].information, H)  # the information turns with the pose
+    for k in (2, 3):
+        np.testing.assert_allclose(out[k].pose, poses[k])
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"reanchor_frame": 5},  # < reanchor_skip + 2
+        {"reanchor_frame": 10},  # the multi-view window's frame
+        {"reanchor_frame": 20, "reanchor_skip": 0},
+        {"reanchor_frame": 20, "init_window": 0, "bootstrap_frames": 3},
+    ],
+)
+def test_reanchor_options_are_checked(options):
+    with pytest.raises(ConfigError):
+        Navigator(**options)
+
+
+def test_relnav_tumbling_preset_expands_to_the_navigator():
+    method, options, preset = resolve_method("relnav-tumbling", {"reanchor_frame": 25})
+    assert method == "relnav" and preset == "relnav-tumbling"
+    assert options == {"surface": "quadric", "reanchor_frame": 25}
+
+
+def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch):
+    """Euler's equations with a wild inertia fit can diverge: the first pass stands, and the
+    run's meta says why."""
+    calls = {"n": 0}
+    real_run = state_module.Tracker.run
+
+    def failing_second_pass(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] > 1:
+            raise ValueError("Found zero norm quaternions in `quat`.")
+        return real_run(self, *a, **k)
+
+    fit = SimpleNamespace(
+        inertia=np.diag([1.0, 2.0, 3.0]), principal=np.array([1.0, 2.0, 3.0]), residual=1e-4
+    )
+    monkeypatch.setattr(state_module.Tracker, "run", failing_second_pass)
+    monkeypatch.setattr(state_module, "fit_inertia", lambda *a, **k: fit)
+    w = 0.02  # rad/s about z
+    frames = [
+        StateRecord("first" if k == 0 else "ok", exp_se3(np.r_[0, 0, 0, 0, 0, w * k]), np.eye(6))
+        for k in range(30)
+    ]
+    run = SimpleNamespace(steps=frames, timestamps=np.arange(30.0), method="relnav")
+    res = relative_state(run, rigid_body=True)
+    assert calls["n"] == 2
+    assert "zero norm" in res.meta["inertia_rejected"]
+    assert np.all(np.isfinite(res.omega))
