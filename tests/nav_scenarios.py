@@ -2,7 +2,28 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
+
+import numpy as np
+
+from relnav.geometry.se3 import invert
+
+FLASH_64 = {
+    "preset": "goldeneye",
+    "name": "flash",
+    "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
+}
+"""A 64×64 flash LIDAR with 2 cm range noise."""
+
+
+def attitude_errors_deg(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Rotation angle (deg) of ``gt⁻¹ est`` per pose ``(N, 4, 4)``."""
+    out = []
+    for E, G in zip(est, gt, strict=True):
+        D = invert(G) @ E
+        out.append(math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1))))
+    return np.array(out)
 
 
 def flash_orbit(
@@ -23,13 +44,7 @@ def flash_orbit(
         "dt": dt,
         "format": "npy",
         "target": target or {"name": "asteroid", "scale_to": 14.0},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
+        "sensors": [dict(FLASH_64)],
         "trajectory": {
             "kind": "elliptic-orbit",
             "params": {"semi_major": 55.0, "semi_minor": 42.0, "loops": 2.5, "tilt_deg": 20.0},

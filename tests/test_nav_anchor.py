@@ -10,9 +10,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from nav_scenarios import FLASH_64, attitude_errors_deg
 from relnav.errors import ConfigError
 from relnav.geometry.lie import exp_se3
-from relnav.geometry.se3 import invert
 from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator
 from relnav.navigation import state as state_module
@@ -33,13 +33,7 @@ def _hold_point(name: str, seed: int, attitude: dict) -> dict:
         "dt": 2.0,
         "format": "npy",
         "target": {"name": "voyager", "scale_to": 12.3},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
+        "sensors": [dict(FLASH_64)],
         "trajectory": {"kind": "static", "params": {"position": (-40.0, 5.0, -6.0)}},
         "attitude": attitude,
     }
@@ -69,14 +63,6 @@ def still_seq(tmp_path_factory):
     return ScanSequence(out)
 
 
-def _attitude_errors_deg(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    out = []
-    for E, G in zip(est, gt, strict=True):
-        D = invert(G) @ E
-        out.append(math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1))))
-    return np.array(out)
-
-
 def _reanchor_record(seq: ScanSequence, **options) -> tuple[dict, object]:
     nav = Navigator(initial_pose=seq.gt_poses[0], **options)
     steps = [nav.register_frame(seq[k]) for k in range(len(seq))]
@@ -91,8 +77,8 @@ def test_reanchoring_removes_the_start_up_turn_of_a_tumbling_target(tumble_seq):
     gt = tumble_seq.gt_poses
     plain = run_sequence(tumble_seq, "relnav", surface="quadric")
     anchored = run_sequence(tumble_seq, "relnav", surface="quadric", reanchor_frame=20)
-    before = _attitude_errors_deg(plain.poses, gt)[20:].mean()
-    after = _attitude_errors_deg(anchored.poses, gt)[20:].mean()
+    before = attitude_errors_deg(plain.poses, gt)[20:].mean()
+    after = attitude_errors_deg(anchored.poses, gt)[20:].mean()
     assert before > 3.0  # the start-up error the option is for
     assert after < 0.5 * before
     np.testing.assert_allclose(anchored.poses[0], gt[0])  # the anchor stays

@@ -3,12 +3,10 @@ accuracy of the refined window against the tracked one, and option checking."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
-from nav_scenarios import flash_orbit
+from nav_scenarios import attitude_errors_deg, flash_orbit
 from relnav.errors import ConfigError
 from relnav.geometry.se3 import invert
 from relnav.navigation import Navigator
@@ -28,14 +26,6 @@ def orbit_seq(tmp_path_factory):
     from relnav.io.sequences import ScanSequence
 
     return ScanSequence(out)
-
-
-def _attitude_errors_deg(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    out = []
-    for E, G in zip(est, gt, strict=True):
-        D = invert(G) @ E
-        out.append(math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1))))
-    return np.array(out)
 
 
 @pytest.fixture(scope="module")
@@ -70,8 +60,8 @@ def test_joint_refinement_does_not_worsen_the_first_frames(orbit_seq, baseline):
     run = run_sequence(
         orbit_seq, "relnav", init_window=WINDOW, init_solver="joint", init_prior="motion"
     )
-    before = _attitude_errors_deg(baseline.poses[:WINDOW], gt[:WINDOW])
-    after = _attitude_errors_deg(run.poses[:WINDOW], gt[:WINDOW])
+    before = attitude_errors_deg(baseline.poses[:WINDOW], gt[:WINDOW])
+    after = attitude_errors_deg(run.poses[:WINDOW], gt[:WINDOW])
     assert np.median(after) <= np.median(before) + 0.05
     assert np.max(after) <= np.max(before) + 0.05
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from nav_scenarios import flash_orbit
+from nav_scenarios import FLASH_64, flash_orbit
 from relnav.geometry.se3 import adjoint, exp_se3, invert, log_se3
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.motion import ConstantVelocityFilter
@@ -145,13 +145,7 @@ def tumble_run(tmp_path_factory):
         "dt": 2.0,
         "format": "npy",
         "target": {"name": "envisat", "scale_to": 16.0},
-        "sensors": [
-            {
-                "preset": "goldeneye",
-                "name": "flash",
-                "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-            }
-        ],
+        "sensors": [dict(FLASH_64)],
         "trajectory": {"kind": "static", "params": {"position": (-50.0, 0.0, 5.0)}},
         "attitude": {
             "kind": "spin",
