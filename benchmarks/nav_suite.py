@@ -188,7 +188,8 @@ def tumbling_holdout() -> dict[str, dict[str, Any]]:
     """Tumbling sequences made after a configuration was frozen, to check it once
     (``nav_state.py --fresh``): voyager and iridium in session 16 after the full state's
     hold-point preset (with ``rigid_body``), orion, eros and capsule in session 17 after the
-    ``relnav-tumbling`` method preset; not part of the navigator's held-out APE tables."""
+    ``relnav-tumbling`` method preset, comet and probe (a procedural Voyager) after the
+    hold-point preset's ``gate_patience``; not part of the navigator's held-out APE tables."""
     return {
         "voyager-tumble-64": _tumble(
             _mesh("voyager", "voyager", 12.3),
@@ -231,6 +232,24 @@ def tumbling_holdout() -> dict[str, dict[str, Any]]:
             (2500.0, 2600.0, 1800.0),
             (-0.3, 0.9, -0.6),
             (5.0, -35.0, 20.0),
+        ),
+        # made in session 17 after the hold-point preset's gate_patience was added (found on
+        # eros-tumble-64, which is therefore no longer a clean check of it)
+        "comet-tumble-64": _tumble(
+            _mesh("comet67p", "asteroid", 14.0),
+            46,
+            (-44.0, 2.0, 6.0),
+            (900.0, 1500.0, 1800.0),
+            (0.4, 0.6, -0.8),
+            (20.0, 5.0, -45.0),
+        ),
+        "probe-tumble-64": _tumble(
+            {"name": "voyager", "scale_to": 12.0},
+            47,
+            (-41.0, -4.0, 3.0),
+            (3000.0, 5500.0, 7000.0),
+            (-0.7, 0.5, 0.6),
+            (-30.0, 15.0, 35.0),
         ),
     }
 

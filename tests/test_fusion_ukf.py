@@ -396,3 +396,29 @@ def test_offset_drift_grows_the_body_offset_in_body_axes():
     np.testing.assert_array_equal(plain.covariance, P)
     with pytest.raises(InputError):
         f.add_offset_drift(np.eye(2))
+
+
+@pytest.mark.parametrize("cls", [TwistorUKF, QuaternionEKF])
+def test_gate_patience_reacquires_a_diverged_filter(cls: type) -> None:
+    """A gate refuses isolated outliers; a run of refusals means the filter is wrong: with
+    ``gate_patience`` it widens and takes the observations again, without it coasts for good."""
+    truth = [50.0, 0.0, 0.0]  # the filter starts 50 m off and every observation says so
+
+    def run(patience):
+        f = cls(dt=4.5, gate_probability=0.999, gate_patience=patience)
+        infos = []
+        for _ in range(6):
+            f.predict()
+            infos.append(f.update(truth, [0.0, 0.0, 0.0, 1.0]))
+        return f, infos
+
+    stuck, infos = run(None)
+    assert not any(i.accepted for i in infos)
+    assert np.linalg.norm(stuck.position) < 1.0
+    back, infos = run(3)
+    assert [i.accepted for i in infos[:2]] == [False, False]
+    assert infos[2].accepted and infos[2].message.startswith("re-acquired")
+    assert all(i.accepted for i in infos[3:])
+    assert np.linalg.norm(back.position - truth) < 1.0
+    with pytest.raises(ConfigError):
+        cls(gate_probability=0.999, gate_patience=0)

@@ -70,7 +70,7 @@ class QuaternionEKF(PoseFilter):
     Parameters
     ----------
     n_mean_motion, dt, q, r, p0, position0, velocity0, quat0, omega0, translation_model,
-    lvlh_axes, gate_probability
+    lvlh_axes, gate_probability, gate_patience
         As for :class:`relnav.fusion.ukf.TwistorUKF`.
     jacobian : {"first-order", "exact"}
         Discretization of the error dynamics (module docstring).
@@ -104,6 +104,7 @@ class QuaternionEKF(PoseFilter):
         jacobian: Jacobian = "first-order",
         covariance_update: Literal["joseph", "standard"] = "joseph",
         gate_probability: float | None = None,
+        gate_patience: int | None = None,
     ) -> None:
         if jacobian not in ("first-order", "exact"):
             raise ConfigError(f"jacobian must be 'first-order' or 'exact', got {jacobian!r}")
@@ -126,6 +127,7 @@ class QuaternionEKF(PoseFilter):
             translation_model=translation_model,
             lvlh_axes=lvlh_axes,
             gate_probability=gate_probability,
+            gate_patience=gate_patience,
         )
 
     def transition_jacobian(self, dt: float) -> np.ndarray:

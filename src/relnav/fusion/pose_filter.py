@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -162,6 +162,7 @@ class PoseFilter:
         translation_model: TranslationModel = "cw",
         lvlh_axes: str | np.ndarray | None = None,
         gate_probability: float | None = None,
+        gate_patience: int | None = None,
     ) -> None:
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
@@ -176,6 +177,12 @@ class PoseFilter:
         if gate_probability is not None and not (0.0 < float(gate_probability) < 1.0):
             raise ConfigError(f"gate_probability must be in (0, 1), got {gate_probability!r}")
         self.gate_probability = None if gate_probability is None else float(gate_probability)
+        if gate_patience is not None and not (
+            isinstance(gate_patience, int | np.integer) and gate_patience >= 1
+        ):
+            raise ConfigError(f"gate_patience must be an integer >= 1, got {gate_patience!r}")
+        self.gate_patience = None if gate_patience is None else int(gate_patience)
+        self._gated_run = 0  # consecutive observations refused by the gate
         self._d = np.zeros(3)
         self._v = np.zeros(3)
         self._q = np.array([0.0, 0.0, 0.0, 1.0])
@@ -401,9 +408,35 @@ class PoseFilter:
         if nq < 1e-9:
             return UpdateInfo(False, message="zero quaternion")
         try:
-            return self._update(p, q / nq, _sym(Rm))
+            info = self._update(p, q / nq, _sym(Rm))
+            gated = not info.accepted and info.message.startswith("gated")
+            self._gated_run = self._gated_run + 1 if gated else 0
+            if gated and self.gate_patience and self._gated_run >= self.gate_patience:
+                info = self._reacquire(p, q / nq, _sym(Rm), info)
+            return info
         except np.linalg.LinAlgError as e:
             return UpdateInfo(False, message=f"singular innovation covariance ({e})")
+
+    def _reacquire(
+        self, p: np.ndarray, q: np.ndarray, R: np.ndarray, gated: UpdateInfo
+    ) -> UpdateInfo:
+        """**[interpretation]** ``gate_patience`` observations in a row refused by the gate
+        mean that the filter, not the observations, has gone wrong (a gate is for isolated
+        outliers; without this a diverged filter refuses every later observation and coasts
+        for good). Its covariance is widened by ``2 · NIS / χ²`` (the observation then sits
+        inside the gate) and the observation is used; until an observation passes the gate
+        by itself, each one refused is taken so."""
+        assert self.gate_probability is not None
+        limit = float(chi2.ppf(self.gate_probability, gated.innovation.size))
+        self._widen(2.0 * gated.nis / limit)
+        info = self._update(p, q, R)
+        if info.accepted:  # the run goes on until an observation passes the gate by itself
+            info = replace(info, message=f"re-acquired after {self._gated_run} gated")
+        return info
+
+    def _widen(self, factor: float) -> None:
+        """Scale the state covariance by ``factor`` (> 1)."""
+        self._P = _sym(self._P * float(factor))
 
     def _gate(self, nis: float, m: int) -> str:
         if not math.isfinite(nis):
@@ -432,6 +465,7 @@ class PoseFilter:
             "r": np.sqrt(np.diag(self.R)).tolist(),
             "p0": asdict(self.p0),
             "gate_probability": self.gate_probability,
+            "gate_patience": self.gate_patience,
         }
 
     def __repr__(self) -> str:

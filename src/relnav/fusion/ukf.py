@@ -205,6 +205,10 @@ class TwistorUKF(PoseFilter):
     covariance_update : {"standard", "joseph"}
     gate_probability : float, optional
         Reject measurements whose NIS exceeds the χ² quantile (default: no gate).
+    gate_patience : int, optional
+        With a gate: after this many observations in a row refused by it, the filter is taken
+        to have diverged, its covariance is widened until the observation fits and the
+        observation is used (default: never; a diverged filter then coasts for good).
     centre_offset : bool
         **[interpretation, not in Paper 2]** Estimate the constant body-frame offset ``c``
         (m) from the rotation centre to the observed reference point: the state's ``d`` is
@@ -316,6 +320,7 @@ class TwistorUKF(PoseFilter):
         update_sigma: UpdateSigma = "redraw",
         covariance_update: CovUpdate = "standard",
         gate_probability: float | None = None,
+        gate_patience: int | None = None,
         centre_offset: bool = False,
         axis_sigma: float = 1e-3,
         observer_bias: bool = False,
@@ -401,6 +406,7 @@ class TwistorUKF(PoseFilter):
             translation_model=translation_model,
             lvlh_axes=lvlh_axes,
             gate_probability=gate_probability,
+            gate_patience=gate_patience,
         )
 
     # --- coordinates --------------------------------------------------------------------------
@@ -792,6 +798,10 @@ class TwistorUKF(PoseFilter):
                 return s_new
             s = s_new
         return s
+
+    def _widen(self, factor: float) -> None:
+        super()._widen(factor)
+        self._prop = None  # the update draws its sigma points from the widened covariance
 
     def _inject(self, dx: np.ndarray) -> None:
         """Add an error-state correction to the nominal state."""

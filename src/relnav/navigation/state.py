@@ -71,6 +71,7 @@ STATE_PRESETS: dict[str, dict[str, Any]] = {
         "torque_free_shares": (1.0, 0.1, 0.01, 0.001),
         "bank_floor": 1e-5,
         "gate_probability": 0.999,
+        "gate_patience": 5,
         "rigid_body": True,
         "wander_frames": 100.0,
     },
@@ -87,7 +88,11 @@ identified from a first pass (``rigid_body``, designed on aura-tumble-64; a spin
 first pass). ``wander_frames`` 100 (the translation wander's correlation time, frames; the
 option's default is 50) **[measured, session 17, on envisat-tumble-64 and aura-tumble-64 with
 the ``relnav-tumbling`` navigator]**: 12-dim NEES 11.5 and 12.5, inside the band, against 19.4
-and 19.9 with 50 (the position over-confident). Its rate and NEES on the tumbling sequences, and
+and 19.9 with 50 (the position over-confident). ``gate_patience`` 5 **[interpretation]**: the
+gate is for isolated outliers (envisat-tumble-64 seed 14's three-frame swing); five refusals in
+a row mean the filter has diverged, and it re-acquires (found on eros-tumble-64 seed 9, where
+the gate refused 190 of 200 observations and the rate stayed 1.35°/s off; 0.021°/s with it).
+Its rate and NEES on the tumbling sequences, and
 on those made after it was frozen: ``docs/results/nav/state_hold_point.md``. Knowledge of the
 mission phase, not a default: on a helical approach the offset model follows the navigator's
 attitude drift.
