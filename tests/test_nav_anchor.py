@@ -166,3 +166,11 @@ def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch):
     assert calls["n"] == 2
     assert "zero norm" in res.meta["inertia_rejected"]
     assert np.all(np.isfinite(res.omega))
+
+
+def test_run_record_says_what_the_start_up_decided(tumble_seq):
+    """``run.json``'s ``finalize`` lists the multi-view refinement and the re-anchoring."""
+    run = run_sequence(tumble_seq, "relnav", surface="quadric", reanchor_frame=20)
+    kinds = [r["kind"] for r in run.options["finalize"]["start_up"]]
+    assert kinds == ["multi-view", "reanchor"]
+    assert run.options["finalize"]["start_up"][1]["accepted"] is True

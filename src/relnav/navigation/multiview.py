@@ -642,6 +642,7 @@ def refine_window(nav: Navigator) -> None:
     if not accepted:
         nav.refinements.append(
             {
+                "kind": "multi-view",
                 "frames": len(frames),
                 "rounds": rounds,
                 "accepted": False,
@@ -653,6 +654,7 @@ def refine_window(nav: Navigator) -> None:
     out = adopt_window(nav, frames, before)
     nav.refinements.append(
         {
+            "kind": "multi-view",
             "frames": len(frames),
             "rounds": rounds,
             "time_s": time.perf_counter() - t_start,

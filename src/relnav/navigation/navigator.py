@@ -865,9 +865,18 @@ class Navigator:
         return poses
 
     def final_report(self) -> dict[str, Any]:
-        """What :meth:`finalize` decided, for the run's record (``run.json``): the orbit
-        test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`)."""
-        return {} if self.orbit is None else {"orbit": self.orbit.as_dict()}
+        """What the navigator decided once per run, for the run's record (``run.json``): the
+        orbit test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`)
+        and the start-up's multi-view refinements and re-anchoring (accepted or not, why)."""
+        out: dict[str, Any] = {}
+        if self.orbit is not None:
+            out["orbit"] = self.orbit.as_dict()
+        if self.refinements:
+            out["start_up"] = [
+                {k: (float(v) if isinstance(v, np.floating) else v) for k, v in r.items()}
+                for r in self.refinements
+            ]
+        return out
 
     def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:
         """The azimuth about a body of revolution's axis from the target's free relative orbit
