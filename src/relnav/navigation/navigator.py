@@ -872,10 +872,7 @@ class Navigator:
         if self.orbit is not None:
             out["orbit"] = self.orbit.as_dict()
         if self.refinements:
-            out["start_up"] = [
-                {k: (float(v) if isinstance(v, np.floating) else v) for k, v in r.items()}
-                for r in self.refinements
-            ]
+            out["start_up"] = [dict(r) for r in self.refinements]
         return out
 
     def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:
