@@ -15,16 +15,21 @@ error), which no later registration sees.
 Once ``reanchor_frame`` frames are tracked, the map of the frames from ``reanchor_skip`` on
 (dense, away from the first scan's sample positions) is where the first scan is registered again,
 from its pose under the first frame's weak prior. Its answer ``T₀'`` measures the turn: the whole
-window (every frame but the first, the anchor) is turned by ``C = T₀ T₀'⁻¹`` in the target frame
-(:func:`relnav.navigation.multiview.adopt_window` then rebuilds the map and restarts the filter
-and the smoother, as after the multi-view refinement). The correction is refused when its χ²
-against the start-up steps' covariance (frames 1 … ``reanchor_skip``, mapped to the target
-frame) plus the registration's own exceeds ``reanchor_gate``: a target whose surface slides
-along itself (a body of revolution) lets the single scan slide too.
+window but the first frame (the anchor) is turned by ``C = T₀ T₀'⁻¹`` in the target frame, frames
+``1 … reanchor_skip − 1`` by a growing share ``k / reanchor_skip`` of it **[interpretation]**: the
+start-up's error grew over them (:func:`relnav.navigation.multiview.adopt_window` then rebuilds
+the map and restarts the filter and the smoother, as after the multi-view refinement). The
+relative state turns every earlier frame by the whole of ``C`` (``StateRecord.gauge_turn``).
+The correction is refused (each test against χ²₆ at ``reanchor_gate``) when it is inconsistent
+with the start-up steps' covariance (frames 1 … ``reanchor_skip``, in the target frame) plus the
+registration's own, or when the first scan does not fit the later map significantly better at
+the corrected pose than where the start-up put it (the robust mean square's gain times the
+pairs, against what six free parameters take from noise): a target whose surface slides along
+itself lets the single scan slide too.
 
-Not a default: it helps where the start-up error is large and hurts where it is already small
-(one sparse scan's registration, about 0.5°, is then the larger error); see the
-``relnav-hold-point`` method preset and ``docs/navigator.md``.
+Not a default: it helps where the start-up error is large and can hurt where it is already
+small (one sparse scan's registration, about 0.5°, is then the larger error); see the
+``relnav-tumbling`` method preset and ``docs/navigator.md``, "Re-anchoring the start-up".
 """
 
 from __future__ import annotations
