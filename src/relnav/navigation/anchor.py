@@ -116,7 +116,7 @@ def reanchor(nav: Navigator) -> np.ndarray | None:
         0.0,
         c0=float(c.kernel),
     )
-    rms_before = math.sqrt(at.swd / at.sw) if at.sw > 0 else float("inf")
+    rms_before = at.rms
     early = [f for f in used[1:] if f.frame - first.frame <= c.reanchor_skip]
     C_chain = start_up_covariance([f.pose for f in early], [f.step_cov for f in early])
     H = np.asarray(fit["H"]) / fit["var_factor"]

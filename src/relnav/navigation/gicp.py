@@ -510,6 +510,12 @@ class ScanToMapFit:
     d2: np.ndarray
     idx: np.ndarray
 
+    @property
+    def rms(self) -> float:
+        """Robust RMS of the pairs' Mahalanobis distances, ``√(swd / sw)`` (inf without a
+        pair)."""
+        return math.sqrt(self.swd / self.sw) if self.sw > 0 else math.inf
+
 
 def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
     """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the

@@ -707,7 +707,7 @@ class Navigator:
         alt, _, _ = self.repeats.apply(P, alt, T_c, Lam, gate, rng, False)
         d = log_se3(alt.T @ invert(fit["T"]))
         dist = math.sqrt(max(float(d @ H_post @ d), 0.0))
-        rms_alt = float(math.sqrt(alt.swd / alt.sw)) if alt.sw > 0 else float("inf")
+        rms_alt = alt.rms
         info.update(
             stability_distance=dist,
             stability_start_sigma=shift / sig_w,

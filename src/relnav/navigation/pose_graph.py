@@ -561,7 +561,7 @@ def register_submap(
     )
     n = max(len(P), 1)
     has = fit.d2 >= 0
-    rms = float(math.sqrt(fit.swd / fit.sw)) if fit.sw > 0 else math.inf
+    rms = fit.rms
     var_factor = max(1.0, rms**2) if np.isfinite(rms) else 1.0
     radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), v)
     sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])

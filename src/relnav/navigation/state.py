@@ -552,12 +552,11 @@ def relative_state(
             q2["torque_free"] = False
             try:
                 second = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
-                second, why = None, f"{type(e).__name__}: {e}"
-            else:
                 finite = np.all(np.isfinite(second.omega)) and np.all(np.isfinite(second.quat))
                 why = "" if finite else "non-finite states"
-            if second is None or why:
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
+                why = f"{type(e).__name__}: {e}"
+            if why:
                 # Euler's equations with a wild fit can diverge: the first pass stands
                 log.warning("rigid body: second pass refused (%s); first pass kept", why)
                 meta["inertia_rejected"] = why
