@@ -393,6 +393,24 @@ def test_normal_information_drops_the_in_plane_pull(rng):
     assert np.all(np.linalg.eigvalsh(H[np.ix_(fixed, fixed)]) > 1e3)
 
 
+def test_degeneracy_and_variance_factor_of_a_registration(rng):
+    """The lever-arm-normalised eigenvalue ratio is 1 for information that weighs metres and
+    radians alike at that lever arm and 0 with a free direction; the variance factor only scales
+    information down, and is 1 without pairs."""
+    from relnav.navigation.gicp import degeneracy, variance_factor
+
+    r = 40.0
+    H = np.diag([1.0, 1.0, 1.0, r**2, r**2, r**2])
+    assert degeneracy(H, r) == pytest.approx(1.0)
+    assert degeneracy(H, 1.0) == pytest.approx(1.0 / r**2)
+    H[5, 5] = 0.0  # rotation about z unconstrained
+    assert degeneracy(H, r) == 0.0
+    assert degeneracy(np.zeros((6, 6)), r) == 0.0
+    assert variance_factor(0.5) == 1.0
+    assert variance_factor(2.0) == pytest.approx(4.0)
+    assert variance_factor(float("nan")) == variance_factor(float("inf")) == 1.0
+
+
 def test_drift_covariance_maps_the_step_to_the_observation(rng):
     """A step error is a body twist of ``T_target_sensor``; the observation is the target's
     position in the sensor frame and its attitude in target axes."""

@@ -37,7 +37,14 @@ from relnav.geometry.se3 import adjoint
 if TYPE_CHECKING:
     from relnav.navigation.voxel_map import VoxelMap
 
-__all__ = ["ScanToMapFit", "left_information", "normal_information", "solve_scan_to_map"]
+__all__ = [
+    "ScanToMapFit",
+    "degeneracy",
+    "left_information",
+    "normal_information",
+    "solve_scan_to_map",
+    "variance_factor",
+]
 
 
 @njit(cache=True)
@@ -515,6 +522,24 @@ class ScanToMapFit:
         """Robust RMS of the pairs' Mahalanobis distances, ``√(swd / sw)`` (inf without a
         pair)."""
         return math.sqrt(self.swd / self.sw) if self.sw > 0 else math.inf
+
+
+def variance_factor(rms: float) -> float:
+    """**[interpretation]** The factor dividing a registration's information: residuals larger
+    than the map's noise model (resampled surfaces, map blur) scale it down, ``σ̂² = max(1,
+    rms²)`` with ``rms`` the robust RMS of the pairs' Mahalanobis distances (1 when not finite:
+    no pair)."""
+    return max(1.0, rms**2) if math.isfinite(rms) else 1.0
+
+
+def degeneracy(H: np.ndarray, radius: float) -> float:
+    """Ratio of the smallest to the largest eigenvalue of a registration's information ``H``
+    (6×6, left twist ``[ρ (m), φ (rad)]``) with its rotations scaled by the lever arm ``radius``
+    (m), so that metres and radians weigh alike; 0 when ``H`` carries no information."""
+    sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
+    Hs = H * sc[:, None] * sc[None, :]
+    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
+    return float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
 
 
 def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:

@@ -50,9 +50,11 @@ from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
 from relnav.navigation.gicp import (
     ScanToMapFit,
+    degeneracy,
     left_information,
     normal_information,
     solve_scan_to_map,
+    variance_factor,
 )
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.options import NavigatorConfig, in_map
@@ -810,11 +812,7 @@ class Navigator:
         has = fit.d2 >= 0
         inl = has & (fit.d2 < 9.0)
         xi = log_se3(fit.T @ invert(T_pred))
-        # degeneracy: eigenvalues of H with rotations scaled by the lever arm
-        sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
-        Hs = H_cov * sc[:, None] * sc[None, :]
-        ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
-        rms = float(math.sqrt(fit.swd / fit.sw)) if fit.sw > 0 else float("nan")
+        rms = fit.rms if fit.sw > 0 else float("nan")
         return {
             "T": fit.T,
             "H": H_cov,
@@ -824,11 +822,9 @@ class Navigator:
             "fitness": float(inl.sum()) / n,
             "n_inliers": int(inl.sum()),
             "chi2": float(xi @ Lam @ xi),
-            "cond": float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0,
+            "cond": degeneracy(H_cov, radius),
             "rms": rms,
-            # [interpretation] residuals larger than the map's noise model (resampled
-            # surfaces, map blur) scale the information down: σ̂² = mean weighted d² ≥ 1
-            "var_factor": max(1.0, rms**2) if np.isfinite(rms) else 1.0,
+            "var_factor": variance_factor(rms),
             "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
             "repeat_fraction": repeat_frac,
             "repeated": repeated,

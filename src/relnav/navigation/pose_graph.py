@@ -65,7 +65,7 @@ import numpy as np
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.pose_graph import PoseGraph, PoseGraphResult
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.gicp import solve_scan_to_map
+from relnav.navigation.gicp import degeneracy, solve_scan_to_map, variance_factor
 from relnav.navigation.voxel_map import VoxelMap
 
 __all__ = [
@@ -561,17 +561,12 @@ def register_submap(
     )
     n = max(len(P), 1)
     has = fit.d2 >= 0
-    rms = fit.rms
-    var_factor = max(1.0, rms**2) if np.isfinite(rms) else 1.0
     radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), v)
-    sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
-    Hs = fit.H * sc[:, None] * sc[None, :]
-    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
     return {
         "T": fit.T,
-        "H": fit.H / var_factor,
+        "H": fit.H / variance_factor(fit.rms),
         "overlap": float(has.sum()) / n,
-        "rms": rms,
-        "cond": float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0,
+        "rms": fit.rms,
+        "cond": degeneracy(fit.H, radius),
         "n_pairs": int(fit.n_pairs),
     }
