@@ -36,9 +36,9 @@ innovations on the SUITE sequence envisat-tumble-64's N runs, without ground tru
 (:func:`relnav.navigation.noise_fit.fit_noise_scales`, ~4 min for 20 runs), prints them and then
 reports both sequences with them (aura-tumble-64 is held out: only checked).
 
-``--fresh`` (with ``--seeds N``) runs the Monte Carlo on the tumbling sequences made after the
-hold-point preset was frozen (``nav_suite.tumbling_holdout``: voyager-tumble-64,
-iridium-tumble-64) instead.
+``--fresh`` (with ``--seeds N``) runs the Monte Carlo on the tumbling sequences made after a
+configuration was frozen (``nav_suite.tumbling_holdout``: voyager, iridium, orion, eros, capsule,
+comet and probe, ``-tumble-64``) instead.
 
 ``--error-structure`` (with ``--seeds N``) prints what the navigator's online pose error is
 made of on both sequences, from the truth (``T_b_m``: the map's frame in the target's): the
@@ -177,8 +177,9 @@ def report_single(name: str, res) -> None:
     rates = rate_nees(res, k0)
     rate_true = np.degrees(np.median(np.linalg.norm(res.truth.omega, axis=1)))
     print(f"{name}: true rate {rate_true:.2f} deg/s; after {k0} of {len(res)} frames:")
+    err = res.errors()
     for key, label in (("omega", "body axes"), ("omega_sensor", "sensor axes")):
-        w = np.degrees(np.linalg.norm(res.errors()[key][k0:], axis=1))
+        w = np.degrees(np.linalg.norm(err[key][k0:], axis=1))
         print(
             f"  angular-rate error deg/s, {label}: median {np.median(w):.3f}  p95 "
             f"{np.percentile(w, 95):.3f}  max {w.max():.3f}"
@@ -206,8 +207,9 @@ def report_monte_carlo(name: str, results: list) -> None:
     k0 = round(0.3 * len(results[0]))
     # (n, K, 5): the four 3-dim blocks and the whole 12-dim state, from step k0
     B = np.stack([np.column_stack([r.nees_blocks(), r.nees()])[k0:] for r in results])
+    errs = [r.errors() for r in results]
     w, w_sensor = (
-        np.concatenate([np.degrees(np.linalg.norm(r.errors()[key][k0:], axis=1)) for r in results])
+        np.concatenate([np.degrees(np.linalg.norm(e[key][k0:], axis=1)) for e in errs])
         for key in ("omega", "omega_sensor")
     )
     per_step = np.nanmean(B[:, :, 4], axis=0)  # averaged over the runs

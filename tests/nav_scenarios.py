@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from relnav.geometry.se3 import invert
+from relnav.geometry.rotations import angle_between_rotations
 
 FLASH_64 = {
     "preset": "goldeneye",
@@ -19,11 +18,8 @@ FLASH_64 = {
 
 def attitude_errors_deg(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """Rotation angle (deg) of ``gt⁻¹ est`` per pose ``(N, 4, 4)``."""
-    out = []
-    for E, G in zip(est, gt, strict=True):
-        D = invert(G) @ E
-        out.append(math.degrees(math.acos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1))))
-    return np.array(out)
+    est, gt = np.asarray(est), np.asarray(gt)
+    return np.atleast_1d(np.degrees(angle_between_rotations(gt[:, :3, :3], est[:, :3, :3])))
 
 
 def flash_orbit(

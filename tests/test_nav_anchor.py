@@ -13,6 +13,7 @@ import pytest
 from nav_scenarios import FLASH_64, attitude_errors_deg
 from relnav.errors import ConfigError
 from relnav.geometry.lie import exp_se3
+from relnav.geometry.rotations import rotation_angle
 from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator
 from relnav.navigation import state as state_module
@@ -92,7 +93,7 @@ def test_reanchoring_records_the_turn_for_the_relative_state(tumble_seq):
     assert turned == [19]  # the window's 20th frame
     G = steps[19].result.info["gauge_turn"]
     assert G.shape == (4, 4) and np.allclose(G[3], [0, 0, 0, 1])
-    angle = math.degrees(math.acos(np.clip((np.trace(G[:3, :3]) - 1) / 2, -1, 1)))
+    angle = math.degrees(rotation_angle(G[:3, :3]))
     assert abs(angle - rec["rotation_deg"]) < 1e-6 and angle > 1.0
 
 

@@ -72,6 +72,7 @@ from numba import njit
 from relnav.errors import ConfigError
 from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
 from relnav.geometry.lie import _exp, _log, exp_se3, log_se3
+from relnav.geometry.rotations import angle_between_rotations, rotation_angle
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
 from relnav.navigation.options import in_map
@@ -636,7 +637,7 @@ def refine_window(nav: Navigator) -> None:
             ):
                 continue
             D = invert(f.pose) @ fit.T
-            ang = math.acos(float(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+            ang = rotation_angle(D[:3, :3])
             moved = max(moved, float(np.linalg.norm(D[:3, 3])) + ang * f.rng)
             f.pose = fit.T.copy()
     if not accepted:
@@ -725,9 +726,7 @@ def adopt_window(
     if nav.relocalizer is not None:
         nav.relocalizer._map_version += 1
     shift = [
-        math.degrees(
-            math.acos(float(np.clip((np.trace((invert(T0) @ f.pose)[:3, :3]) - 1) / 2, -1.0, 1.0)))
-        )
+        math.degrees(angle_between_rotations(T0[:3, :3], f.pose[:3, :3]))
         for f, T0 in zip(frames, before, strict=True)
     ]
     return {"max_rotation_deg": max(shift), "velocity_chi2": chi2_v, "pose_chi2": chi2_p}
