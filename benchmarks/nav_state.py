@@ -200,7 +200,7 @@ def report_single(name: str, res) -> None:
     print(f"  mean NEES, rates (6-dim): {rates.mean():.2f} (95 % band {lo6:.2f}-{hi6:.2f})")
 
 
-def report_monte_carlo(name: str, results: list) -> None:
+def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> None:
     from relnav.navigation.state import nees_band
 
     n = len(results)
@@ -216,7 +216,7 @@ def report_monte_carlo(name: str, results: list) -> None:
     lo, hi = nees_band(n)  # band of the average of n runs at one step (12 dof)
     inside = float(np.mean((per_step >= lo) & (per_step <= hi)))
     pooled = np.nanmean(B, axis=(0, 1))
-    print(f"{name}: {n} noise seeds, steps {k0}-{len(results[0]) - 1}")
+    print(f"{name}: {n} {runs}, steps {k0}-{len(results[0]) - 1}")
     ape = np.array([r.meta.get("navigator_ape", (np.nan, np.nan)) for r in results])
     print(
         f"  navigator APE (all frames) m: median {np.median(ape[:, 0]):.2f}  mean "

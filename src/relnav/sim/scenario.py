@@ -189,6 +189,9 @@ class AttitudeSpec(StrictModel):
     ``static``: fixed at ``initial_rpy_deg``; ``spin``: about world ``axis`` at ``rate_deg_s``;
     ``tumble``: torque-free from ``inertia`` (3 principal moments or 3x3, kg m²) and body rate
     ``omega0_deg_s``. ``initial_rpy_deg`` is the attitude at t = 0 (extrinsic xyz, degrees).
+    ``phase_s`` (s, default 0) enters the same motion later: the attitude at a frame's time
+    ``t`` is the law's at ``t + phase_s`` (a Monte Carlo over where a tumble is when the
+    sensor starts: ``benchmarks/nav_phases.py``).
     """
 
     kind: Literal["static", "spin", "tumble"] = "static"
@@ -197,10 +200,13 @@ class AttitudeSpec(StrictModel):
     inertia: Vec3 | tuple[Vec3, Vec3, Vec3] = (1.0, 2.0, 3.0)
     omega0_deg_s: Vec3 = (0.0, 0.0, 0.0)
     initial_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    phase_s: float = Field(default=0.0, ge=0, allow_inf_nan=False)
 
     def rotations(self, times: np.ndarray) -> np.ndarray:
-        """``R_W_target`` ``(N, 3, 3)`` at ``times`` (s)."""
+        """``R_W_target`` ``(N, 3, 3)`` at ``times`` (s), the law evaluated at ``times +
+        phase_s``."""
         R0 = euler_to_matrix(np.deg2rad(np.asarray(self.initial_rpy_deg)), "xyz")
+        times = np.asarray(times, dtype=np.float64) + self.phase_s
         if self.kind == "static":
             return make_attitude("static", times, R0=R0)
         if self.kind == "spin":
