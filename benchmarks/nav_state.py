@@ -68,7 +68,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import MISSION, holdout, sequence_names, suite, tumbling_holdout
+from nav_suite import MISSION, holdout, sequence_names, step_errors, suite, tumbling_holdout
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -123,8 +123,12 @@ def track(
         variants = [{**(state or {}), "process_noise": p} for p in process_noises]
     out = [relative_state(run, gt_poses=seq.gt_poses, **state_options(v)) for v in variants]
     m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
-    for r in out:  # the navigator's own trajectory error, for the reports
+    et, er = step_errors(np.asarray(run.poses), np.asarray(seq.gt_poses))
+    flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]], dtype=bool)
+    for r in out:  # the navigator's own trajectory error and steps, for the reports
         r.meta["navigator_ape"] = (m["ape_trans_rmse"], m["ape_rot_rmse_deg"])
+        r.meta["step_wrong"] = (et > 0.5) | (er > 5.0)  # steps 1 … K − 1, nav_suite's rule
+        r.meta["step_flagged"] = flagged
     return out if len(out) > 1 else out[0]
 
 
@@ -238,6 +242,24 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
         + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, pooled[:4], strict=True))
         + f"; 12-dim {pooled[4]:.1f}"
     )
+    report_alarms(results)
+
+
+def report_alarms(results: list) -> None:
+    """Wrong steps (0.5 m or 5°) flagged by the navigator, and by the navigator or the state's
+    innovation alarm (``TrackResult.innovation_alarm``), over every run and step."""
+    wrong, nav, both = [], [], []
+    for r in results:
+        w, f = r.meta["step_wrong"], r.meta["step_flagged"]
+        wrong.append(w)
+        nav.append(f)
+        both.append(f | r.innovation_alarm()[1 : len(w) + 1])
+    w, f, b = (np.concatenate(x) for x in (wrong, nav, both))
+    for label, x in (("navigator", f), ("navigator or the state's innovation alarm", b)):
+        print(
+            f"  flagged by the {label}: {int(np.sum(x & w))} of {int(w.sum())} wrong steps, "
+            f"{int(np.sum(x & ~w))} of {int(np.sum(~w))} right ones ({np.mean(x[~w]):.1%})"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -293,3 +293,35 @@ def test_rate_error_in_sensor_axes_ignores_a_constant_body_frame_offset(tmp_path
     np.testing.assert_allclose(body, np.degrees(np.linalg.norm(w_true - omega_est[0])))
     assert body[0] > 0.08  # |ω_xy| · 2 sin 5° = 0.087 deg/s
     assert "err_wsx" in res.to_csv(tmp_path / "state.csv").read_text().splitlines()[0]
+
+
+def _nis_track(nis: np.ndarray):
+    from relnav.fusion.track_result import TrackResult
+
+    K = len(nis)
+    return TrackResult(
+        time=np.arange(K, dtype=float), position=np.zeros((K, 3)), velocity=np.zeros((K, 3)),
+        quat=np.tile([0.0, 0.0, 0.0, 1.0], (K, 1)), omega=np.zeros((K, 3)),
+        covariance=np.tile(np.eye(12), (K, 1, 1)), status=["update"] * K, nis=nis,
+        observed=np.full((K, 7), np.nan), filter="ukf", settings={},
+    )  # fmt: skip
+
+
+def test_innovation_alarm_catches_a_run_of_large_innovations(tmp_path):
+    """A consistent filter's NIS (χ²₆) rarely raises the windowed alarm; a stretch of
+    innovations 4× too large does, from within one window of its start, and the alarm ends one
+    window after it; a gap of unobserved steps (NaN) neither raises nor hides it."""
+    rng = np.random.default_rng(5)
+    nis = rng.chisquare(6, 2000)
+    quiet = _nis_track(nis).innovation_alarm()
+    assert quiet.mean() < 0.005
+    bad = nis.copy()
+    bad[1000:1030] *= 4.0
+    bad[1100:1110] = np.nan
+    alarm = _nis_track(bad).innovation_alarm(window=5)
+    assert alarm[1004:1030].mean() > 0.9
+    assert not alarm[1035:1100].any() and not alarm[1100:1110].any()
+    with pytest.raises(ValueError):
+        _nis_track(nis).innovation_alarm(window=0)
+    header = _nis_track(bad).to_csv(tmp_path / "s.csv").read_text().splitlines()[0]
+    assert header.endswith("innovation_alarm")

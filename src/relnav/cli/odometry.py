@@ -70,6 +70,8 @@ def write_state_outputs(
         nees = nees[np.isfinite(nees)]
         summary = result.summary(skip=0.3)
         metrics["state"] = {
+            # frames whose last innovations the state's dynamics cannot follow (state.csv)
+            "innovation_alarm_frames": int(np.sum(result.innovation_alarm())),
             "skip_fraction": 0.3,
             "omega_rms_deg_s": summary["omega"]["rms"],
             "omega_max_deg_s": summary["omega"]["max"],
@@ -348,6 +350,8 @@ def odometry(
     for key in ("e_T_avg", "e_T_max", "drift", "T_error_pct", "e_R_avg", "e_R_max", "e_RT"):
         if key in m:
             table.add_row(key, f"{m[key]:.4g}")
+    if (alarms := m.get("state", {}).get("innovation_alarm_frames")) is not None:
+        table.add_row("state: innovation alarm (frames)", str(alarms))
     console.print(table)
     orbit = run.options.get("finalize", {}).get("orbit")
     if orbit is not None:

@@ -262,6 +262,30 @@ class TrackResult:
                 out[k, b] = err[k, s] @ np.linalg.solve(self.covariance[k][s, s], err[k, s])
         return out
 
+    def innovation_alarm(
+        self, window: int = 5, probability: float = 0.999, dof: int = 6
+    ) -> np.ndarray:
+        """``(K,)`` bool: steps where the mean NIS of the last ``window`` innovations (accepted
+        or gated observations, this step included) exceeds the ``probability`` quantile of the
+        mean of that many ``χ²_dof`` values, with at least half the window observed.
+
+        **[interpretation]** A causal windowed innovation test (fault detection as in GNSS
+        integrity monitoring): a run of observations that the filter's dynamics cannot follow,
+        such as a navigator's map sliding at a hold point, where one step alone is within its
+        gate (``benchmarks/nav_phases.py``). ``window`` 5 and ``probability`` 0.999 were chosen
+        on envisat-tumble-64's and aura-tumble-64's random phases
+        (``docs/results/nav/state_hold_point.md``).
+        """
+        if window < 1 or not 0.0 < probability < 1.0:
+            raise ValueError("window must be at least 1 and probability in (0, 1)")
+        nis = np.asarray(self.nis, dtype=np.float64)
+        seen = np.isfinite(nis)
+        total = np.convolve(np.where(seen, nis, 0.0), np.ones(window))[: len(nis)]
+        count = np.convolve(seen.astype(np.float64), np.ones(window))[: len(nis)]
+        limit = chi2.ppf(probability, dof * window) / window
+        enough = count >= max(window // 2, 1)
+        return enough & (total > limit * np.maximum(count, 1.0))
+
     def consistency(self, probability: float = 0.95) -> dict[str, Any]:
         """Mean NIS over the updates and mean NEES over the estimated steps (after the
         initializing one), each with the two-sided ``probability`` band of the mean of that
@@ -372,6 +396,7 @@ class TrackResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
+            cols["innovation_alarm"] = self.innovation_alarm().astype(np.float64)
             w.writerow(["time", "status", "nis", *cols])
             for k in range(len(self)):
                 w.writerow(

@@ -550,8 +550,9 @@ def relative_state(
             # the torque-free model's own miss is the angular acceleration it leaves out
             q2 = {**tracker_options["q"], "angular_acceleration": fit.residual}
             q2["torque_free"] = False
-            try:
-                second = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
+            try:  # a diverging pass overflows: said once below, not by numpy per sigma point
+                with np.errstate(over="ignore", invalid="ignore"):
+                    second = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
                 finite = np.all(np.isfinite(second.omega)) and np.all(np.isfinite(second.quat))
                 why = "" if finite else "non-finite states"
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
