@@ -39,9 +39,10 @@ WRONG_T, WRONG_R = 0.5, 5.0
 
 def pose_error(T: np.ndarray, G: np.ndarray) -> tuple[float, float]:
     """Translation (m) and rotation (deg) error of ``T`` against ``G``."""
+    from relnav.geometry.rotations import rotation_angle
+
     e = np.linalg.inv(G) @ T
-    c = np.clip((np.trace(e[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
-    return float(np.linalg.norm(e[:3, 3])), math.degrees(math.acos(c))
+    return float(np.linalg.norm(e[:3, 3])), math.degrees(rotation_angle(e[:3, :3]))
 
 
 def kidnap_plan(n: int, kidnaps: int, gap: int, rng: np.random.Generator) -> list[int]:

@@ -417,14 +417,14 @@ def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
 
 def step_errors(est: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-step translation (m) and rotation (deg) error of consecutive relative poses."""
+    from relnav.geometry.rotations import rotation_angle
     from relnav.geometry.se3 import invert
 
     dt, dr = [], []
     for k in range(1, len(est)):
         e = invert(invert(gt[k - 1]) @ gt[k]) @ (invert(est[k - 1]) @ est[k])
         dt.append(np.linalg.norm(e[:3, 3]))
-        c = np.clip((np.trace(e[:3, :3]) - 1) / 2, -1, 1)
-        dr.append(math.degrees(math.acos(c)))
+        dr.append(math.degrees(rotation_angle(e[:3, :3])))
     return np.asarray(dt), np.asarray(dr)
 
 
