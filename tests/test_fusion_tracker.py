@@ -310,7 +310,7 @@ def _nis_track(nis: np.ndarray):
 def test_innovation_alarm_catches_a_run_of_large_innovations(tmp_path):
     """A consistent filter's NIS (χ²₆) rarely raises the windowed alarm; a stretch of
     innovations 4× too large does, from within one window of its start, and the alarm ends one
-    window after it; a gap of unobserved steps (NaN) neither raises nor hides it."""
+    window after it; a gap of unobserved steps (NaN) raises none."""
     rng = np.random.default_rng(5)
     nis = rng.chisquare(6, 2000)
     quiet = _nis_track(nis).innovation_alarm()

@@ -350,7 +350,7 @@ class TrackResult:
 
         Angles in degrees (Euler angles extrinsic xyz), rates in deg/s, lengths in metres; a
         mixed track adds each member's probability (``p_model<i>``, members in
-        ``meta["models"]``).
+        ``meta["models"]``); the last column is :meth:`innovation_alarm` (0/1).
         """
         path = Path(path)
         sig = self.sigma()
@@ -393,10 +393,10 @@ class TrackResult:
         if self.model_probability is not None:
             for i in range(self.model_probability.shape[1]):
                 cols[f"p_model{i}"] = self.model_probability[:, i]
+        cols["innovation_alarm"] = self.innovation_alarm().astype(np.float64)
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
-            cols["innovation_alarm"] = self.innovation_alarm().astype(np.float64)
             w.writerow(["time", "status", "nis", *cols])
             for k in range(len(self)):
                 w.writerow(
