@@ -20,8 +20,12 @@ With ``--seeds N`` each sequence is simulated again with N noise seeds (1000 …
 same target, path and sensor) and the NEES is tested as a Monte Carlo test should be: per time
 step, the NEES averaged over the N runs against the 95 % band of such an average (the fraction
 of steps inside it), and the pooled mean NEES of each 3-dim block (position, velocity,
-attitude, angular rate; 3 when consistent). One run's time average is not a fair test: its
-errors are correlated from step to step (the navigator's map drift), so its band is too narrow.
+attitude, angular rate; 3 when consistent), the share of each block's mean squared error that
+is common to every run (the per-step mean over the runs: the runs share the geometry, so the
+per-step band's independence does not hold for that part; ``benchmarks/nav_phases.py --state``
+varies the geometry too) and the wrong steps flagged by the navigator and by its state's
+innovation alarm. One run's time average is not a fair test: its errors are correlated from
+step to step (the navigator's map drift), so its band is too narrow.
 
 ``--compare suite`` (or ``holdout``) runs ``relnav`` once on every sequence of the suite (with the
 paper presets) or of the held-out set and prints, as a markdown table, the relative state's errors
@@ -241,6 +245,17 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
         "  pooled mean NEES per 3-dim block (3 = consistent): "
         + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, pooled[:4], strict=True))
         + f"; 12-dim {pooled[4]:.1f}"
+    )
+    E = np.stack([np.concatenate([e[b][k0:] for b in BLOCKS], axis=1) for e in errs])
+    common = E.mean(axis=0)  # the part of each step's error shared by every run
+    shares = [
+        np.nanmean(np.sum(common[:, 3 * b : 3 * b + 3] ** 2, axis=1))
+        / np.nanmean(np.sum(E[:, :, 3 * b : 3 * b + 3] ** 2, axis=2))
+        for b in range(4)
+    ]
+    print(
+        "  share of the mean squared error common to every run: "
+        + ", ".join(f"{b} {x:.0%}" for b, x in zip(BLOCKS, shares, strict=True))
     )
     report_alarms(results)
 
