@@ -15,7 +15,9 @@ sequence is simulated again ``--phases`` times, run ``i`` entering the same moti
 gives, per method, the APE (no alignment) over the runs (median, 90th percentile, max), the runs
 whose APE exceeds ``--lost`` m (default 5: a tenth of the 50 m station), the steps wrong by more
 than 0.5 m or 5° and the share of them flagged, and the share of right steps flagged (the
-suite's definitions, ``nav_suite.run_method``).
+suite's definitions, ``nav_suite.run_method``); for the navigator, the wrong steps it did not
+flag against their own step covariance (10–90 % of their error and 1σ, their median exceedance
+probability) and what ``flag_probability`` 0.1 instead of 0.5 would flag.
 
 ``--state`` also runs the relative state (``relnav-tumbling`` with ``-S preset=hold-point``,
 :func:`relnav.navigation.state.relative_state`) on every run and prints the Monte Carlo report
@@ -76,7 +78,26 @@ def run(folder: Path, method: str) -> dict[str, Any]:
     from relnav.odometry.presets import resolve_method
 
     resolved, options, _ = resolve_method(method, {})
-    return run_method(folder, resolved, **options)
+    return run_method(folder, resolved, per_step=True, **options)
+
+
+def report_missed(rs: list[dict[str, Any]]) -> None:
+    """The navigator's wrong steps it did not flag against their own step covariance, and
+    what ``flag_probability`` 0.1 (instead of 0.5) would flag."""
+    st = {k: np.concatenate([r["steps"][k] for r in rs]) for k in rs[0]["steps"]}
+    missed = st["wrong"] & ~st["flagged"]
+    if not missed.any() or not np.isfinite(st["sigma_t"][missed]).any():
+        return
+    e10, e90 = np.percentile(st["error_t"][missed], [10, 90])
+    s10, s90 = np.nanpercentile(st["sigma_t"][missed], [10, 90])
+    at_01 = st["flagged"] | (np.nan_to_num(st["exceed"]) > 0.1)
+    right = ~st["wrong"]
+    print(
+        f"    missed wrong steps (10-90 %): error {e10:.2f}-{e90:.2f} m, own 1-sigma "
+        f"{s10:.2f}-{s90:.2f} m, median exceedance {np.nanmedian(st['exceed'][missed]):.3f}; "
+        f"flag_probability 0.1 would flag {int(np.sum(at_01 & st['wrong']))} of "
+        f"{int(st['wrong'].sum())} wrong, {np.mean(at_01[right]):.1%} of right"
+    )
 
 
 def report(name: str, results: dict[str, list[dict[str, Any]]], lost: float) -> None:
@@ -95,6 +116,7 @@ def report(name: str, results: dict[str, list[dict[str, Any]]], lost: float) -> 
             f"({wf / max(wrong, 1):.0%}); right steps flagged {rf} "
             f"({rf / max(steps - wrong, 1):.1%})"
         )
+        report_missed(rs)
 
 
 def main(argv: list[str] | None = None) -> int:

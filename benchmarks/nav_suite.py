@@ -444,9 +444,12 @@ def warm_up(seq_dir: Path, methods: list[str], relnav_options: dict[str, str]) -
             pass
 
 
-def run_method(seq_dir: Path, method: str, **options: Any) -> dict[str, Any]:
+def run_method(
+    seq_dir: Path, method: str, per_step: bool = False, **options: Any
+) -> dict[str, Any]:
     """Run one method on one sequence; APE/RPE (no alignment), wrong and flagged steps, ms
-    (``relnav`` with the :data:`MISSION` input unless ``options`` override it)."""
+    (``relnav`` with the :data:`MISSION` input unless ``options`` override it); ``per_step``
+    adds the steps' arrays under ``"steps"``."""
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.odometry import run_sequence
@@ -461,7 +464,7 @@ def run_method(seq_dir: Path, method: str, **options: Any) -> dict[str, Any]:
     et, er = step_errors(run.poses, seq.gt_poses)
     wrong = (et > 0.5) | (er > 5.0)
     flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]])
-    return {
+    out = {
         "ape": m["ape_trans_rmse"],
         "ape_r": m["ape_rot_rmse_deg"],
         "rpe_t": m["rpe_trans_rmse"],
@@ -474,6 +477,16 @@ def run_method(seq_dir: Path, method: str, **options: Any) -> dict[str, Any]:
         "ms": run.median_time_ms,
         "wall_s": wall,
     }
+    if per_step:  # arrays (not JSON): each step's error, flag, own 1σ (m) and exceedance
+        info = [s.result.info if s.result is not None else {} for s in run.steps[1:]]
+        out["steps"] = {
+            "wrong": wrong,
+            "flagged": flagged,
+            "error_t": et,
+            "sigma_t": np.array([i.get("step_sigma_t", np.nan) for i in info], dtype=float),
+            "exceed": np.array([i.get("exceed_probability", np.nan) for i in info], dtype=float),
+        }
+    return out
 
 
 def markdown_table(results: dict[str, dict[str, Any]]) -> str:
