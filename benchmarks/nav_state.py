@@ -292,6 +292,14 @@ def report_alarms(results: list) -> None:
         nav.append(f)
         both.append(f | r.innovation_alarm()[1 : len(w) + 1])
     w, f, b = (np.concatenate(x) for x in (wrong, nav, both))
+    ape = np.array([r.meta["navigator_ape"][0] for r in results])
+    frames = np.array([int(np.sum(r.innovation_alarm())) for r in results])
+    for label, sel in (("under 0.5 m", ape < 0.5), ("over 5 m", ape > 5.0)):
+        if np.any(sel):
+            print(
+                f"  alarm frames per run, runs {label} APE ({int(sel.sum())}): "
+                f"{frames[sel].min()}-{frames[sel].max()}"
+            )
     for label, x in (("navigator", f), ("navigator or the state's innovation alarm", b)):
         print(
             f"  flagged by the {label}: {int(np.sum(x & w))} of {int(w.sum())} wrong steps, "
