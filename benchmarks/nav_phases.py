@@ -5,6 +5,7 @@
         --methods relnav-tumbling,relnav,kiss-icp,small-gicp             # the default methods
     python benchmarks/nav_phases.py --out bench/nav --state          # + the relative state
     python benchmarks/nav_phases.py --out bench/nav --only voyager-tumble-64   # another one
+    python benchmarks/nav_phases.py --out bench/nav --methods relnav-tumbling -O init_window=0
 
 The navigation suite's tumbling sequences (``benchmarks/nav_suite.py``) each start their tumble
 at one attitude, so one run says little about where the sensor may meet the target. Here each
@@ -19,11 +20,13 @@ suite's definitions, ``nav_suite.run_method``); for the navigator, the wrong ste
 flag against their own step covariance (10–90 % of their error and 1σ, their median exceedance
 probability) and what ``flag_probability`` 0.1 instead of 0.5 would flag.
 
-``--state`` also runs the relative state (``relnav-tumbling`` with ``-S preset=hold-point``,
-:func:`relnav.navigation.state.relative_state`) on every run and prints the Monte Carlo report
-of ``benchmarks/nav_state.py``: the runs differ in the geometry the navigator sees, not only in
-noise, so their errors are independent samples of the ones the filter's covariance describes
-(with noise seeds alone, ``nav_state.py --seeds``, part of the error is common to every run).
+``-O key=value`` passes an option to the navigator's methods (``relnav``, ``relnav-tumbling``;
+the peers run as they are). ``--state`` also runs the relative state (``relnav-tumbling`` with
+``-S preset=hold-point``, :func:`relnav.navigation.state.relative_state`) on every run and
+prints the Monte Carlo report of ``benchmarks/nav_state.py``: the runs differ in the geometry
+the navigator sees, not only in noise, so their errors are independent samples of the ones the
+filter's covariance describes (with noise seeds alone, ``nav_state.py --seeds``, part of the
+error is common to every run).
 """
 
 from __future__ import annotations
@@ -73,12 +76,13 @@ def simulate_phases(out: Path, name: str, phases: int) -> list[Path]:
     return folders
 
 
-def run(folder: Path, method: str) -> dict[str, Any]:
-    """``nav_suite.run_method`` with a method preset (``relnav-tumbling``) resolved."""
+def run(folder: Path, method: str, options: dict[str, str]) -> dict[str, Any]:
+    """``nav_suite.run_method`` with a method preset (``relnav-tumbling``) resolved; the
+    navigator's methods get ``options`` (``-O``)."""
     from relnav.odometry.presets import resolve_method
 
-    resolved, options, _ = resolve_method(method, {})
-    return run_method(folder, resolved, per_step=True, **options)
+    resolved, opts, _ = resolve_method(method, options if method.startswith("relnav") else {})
+    return run_method(folder, resolved, per_step=True, **opts)
 
 
 def report_missed(rs: list[dict[str, Any]]) -> None:
@@ -127,19 +131,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", default="", help="comma-separated tumbling sequences")
     p.add_argument("--lost", type=float, default=5.0, help="APE (m) of a run counted as lost")
     p.add_argument("--state", action="store_true", help="the relative state's Monte Carlo")
+    p.add_argument(
+        "-O", dest="options", action="append", default=[], help="navigator option key=value"
+    )
     a = p.parse_args(argv)
     if a.phases < 1 or not math.isfinite(a.lost):
         p.error("--phases must be at least 1 and --lost finite")
     names = [n for n in a.only.split(",") if n] or SEQUENCES
+    opts = dict(kv.split("=", 1) for kv in a.options)
     for name in names:
         folders = simulate_phases(a.out, name, a.phases)
         methods = [m for m in a.methods.split(",") if m]
-        report(name, {m: [run(f, m) for f in folders] for m in methods}, a.lost)
+        report(name, {m: [run(f, m, opts) for f in folders] for m in methods}, a.lost)
         if a.state:
             from nav_state import report_monte_carlo, track
             from relnav.odometry.presets import resolve_method
 
-            _, options, _ = resolve_method("relnav-tumbling", {})
+            _, options, _ = resolve_method("relnav-tumbling", opts)
             state = {"preset": "hold-point"}
             results = [track(f, options, state=state) for f in folders]
             report_monte_carlo(name, results, runs="phases (and noise seeds)")

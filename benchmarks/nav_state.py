@@ -229,7 +229,8 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
     print(
         f"  navigator APE (all frames) m: median {np.median(ape[:, 0]):.2f}  mean "
         f"{np.mean(ape[:, 0]):.2f}  max {np.max(ape[:, 0]):.2f}; rotation deg: median "
-        f"{np.median(ape[:, 1]):.2f}  max {np.max(ape[:, 1]):.2f}"
+        f"{np.median(ape[:, 1]):.2f}  max {np.max(ape[:, 1]):.2f}; runs over 5 m: "
+        f"{int(np.sum(ape[:, 0] > 5.0))} of {n}"
     )
     for label, x in (("body axes", w), ("sensor axes", w_sensor)):
         print(
