@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import holdout, simulate_suite, step_errors, suite
+from nav_suite import holdout, judge_steps, simulate_suite, suite
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,9 +53,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             e = log_se3(invert(invert(online[k - 1]) @ online[k]) @ (invert(gt[k - 1]) @ gt[k]))
             nees.append(float(e @ np.linalg.solve(info["step_covariance"], e)))
-        et, er = step_errors(run.poses, gt)
-        wrong = (et > 0.5) | (er > 5.0)
-        flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]])
+        _, _, wrong, flagged = judge_steps(run, gt)
         w, fw, r, fr = (
             int(wrong.sum()),
             int((wrong & flagged).sum()),

@@ -23,7 +23,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import MISSION, add_sequence_arguments, sequence_names, simulate_suite, step_errors
+from nav_suite import MISSION, add_sequence_arguments, judge_steps, sequence_names, simulate_suite
 
 
 def _run(folder: Path, options: dict[str, Any]) -> dict[str, Any]:
@@ -49,10 +49,9 @@ def _run(folder: Path, options: dict[str, Any]) -> dict[str, Any]:
     finally:
         nav.correct_azimuth = test
     m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
-    et, er = step_errors(run.poses, seq.gt_poses)
     return {
         "ape": m["ape_trans_rmse"],
-        "wrong": int(((et > 0.5) | (er > 5.0)).sum()),
+        "wrong": int(judge_steps(run, seq.gt_poses)[2].sum()),
         "orbit": run.options.get("finalize", {}).get("orbit"),
         "ms": 1e3 * sum(spent),
     }

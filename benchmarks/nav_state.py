@@ -72,7 +72,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from nav_suite import MISSION, holdout, sequence_names, step_errors, suite, tumbling_holdout
+from nav_suite import MISSION, holdout, judge_steps, sequence_names, suite, tumbling_holdout
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
@@ -127,12 +127,10 @@ def track(
         variants = [{**(state or {}), "process_noise": p} for p in process_noises]
     out = [relative_state(run, gt_poses=seq.gt_poses, **state_options(v)) for v in variants]
     m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
-    et, er = step_errors(np.asarray(run.poses), np.asarray(seq.gt_poses))
-    flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]], dtype=bool)
+    _, _, wrong, flagged = judge_steps(run, seq.gt_poses)
     for r in out:  # the navigator's own trajectory error and steps, for the reports
         r.meta["navigator_ape"] = (m["ape_trans_rmse"], m["ape_rot_rmse_deg"])
-        r.meta["step_wrong"] = (et > 0.5) | (er > 5.0)  # steps 1 … K − 1, nav_suite's rule
-        r.meta["step_flagged"] = flagged
+        r.meta["step_wrong"], r.meta["step_flagged"] = wrong, flagged  # steps 1 … K − 1
     return out if len(out) > 1 else out[0]
 
 
@@ -286,15 +284,17 @@ def report_tracked(B: np.ndarray, ape: np.ndarray, rate_deg_s: np.ndarray) -> No
 def report_alarms(results: list) -> None:
     """Wrong steps (0.5 m or 5°) flagged by the navigator, and by the navigator or the state's
     innovation alarm (``TrackResult.innovation_alarm``), over every run and step."""
-    wrong, nav, both = [], [], []
+    wrong, nav, both, frames = [], [], [], []
     for r in results:
         w, f = r.meta["step_wrong"], r.meta["step_flagged"]
+        alarm = r.innovation_alarm()
         wrong.append(w)
         nav.append(f)
-        both.append(f | r.innovation_alarm()[1 : len(w) + 1])
+        both.append(f | alarm[1 : len(w) + 1])
+        frames.append(int(alarm.sum()))
     w, f, b = (np.concatenate(x) for x in (wrong, nav, both))
     ape = np.array([r.meta["navigator_ape"][0] for r in results])
-    frames = np.array([int(np.sum(r.innovation_alarm())) for r in results])
+    frames = np.array(frames)
     for label, sel in (("under 0.5 m", ape < 0.5), ("over 5 m", ape > 5.0)):
         if np.any(sel):
             print(

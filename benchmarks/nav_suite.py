@@ -428,6 +428,15 @@ def step_errors(est: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.asarray(dt), np.asarray(dr)
 
 
+def judge_steps(run: Any, gt: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The suite's verdict on a run's steps 1 … K − 1: translation (m) and rotation (deg)
+    errors (:func:`step_errors`), wrong (beyond 0.5 m or 5°) and flagged (not ``ok``)."""
+    et, er = step_errors(np.asarray(run.poses), np.asarray(gt))
+    wrong = (et > 0.5) | (er > 5.0)
+    flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]], dtype=bool)
+    return et, er, wrong, flagged
+
+
 def warm_up(seq_dir: Path, methods: list[str], relnav_options: dict[str, str]) -> None:
     """Run every method once, untimed, on the first frames of ``seq_dir`` (past the navigator's
     multi-view window), so that one-off costs (numba's compiled-code cache, a library's first
@@ -461,9 +470,7 @@ def run_method(
     run = run_sequence(seq, method, **options)
     wall = time.perf_counter() - t0
     m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
-    et, er = step_errors(run.poses, seq.gt_poses)
-    wrong = (et > 0.5) | (er > 5.0)
-    flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]])
+    et, _, wrong, flagged = judge_steps(run, seq.gt_poses)
     out = {
         "ape": m["ape_trans_rmse"],
         "ape_r": m["ape_rot_rmse_deg"],
