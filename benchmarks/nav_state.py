@@ -246,6 +246,7 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
         + f"; 12-dim {pooled[4]:.1f}"
     )
     report_tracked(B, ape[:, 0], w.reshape(n, -1))
+    report_inertia(results)
     E = np.stack([np.concatenate([e[b][k0:] for b in BLOCKS], axis=1) for e in errs])
     common = E.mean(axis=0)  # the part of each step's error shared by every run
     shares = [
@@ -278,6 +279,18 @@ def report_tracked(B: np.ndarray, ape: np.ndarray, rate_deg_s: np.ndarray) -> No
             + " / ".join(f"{x:.2f}" for x in pooled[:4])
             + f"); worst rate error {np.nanmax(r):.3f} deg/s, over 0.1 on "
             f"{int(np.sum(r > 0.1))} of {r.size} steps"
+        )
+
+
+def report_inertia(results: list) -> None:
+    """How many runs identified a tumbling target's inertia (``rigid_body``) and which fit's
+    second pass they kept (:func:`relnav.navigation.rigid_body.rigid_body_pass`)."""
+    found = sum(bool(r.meta.get("inertia_identified")) for r in results)
+    if found:
+        kept = [r.meta.get("inertia_source") for r in results]
+        print(
+            f"  inertia identified on {found} of {len(results)} runs; second pass kept with the "
+            f"attitudes' fit on {kept.count('attitudes')}, the rates' on {kept.count('rates')}"
         )
 
 

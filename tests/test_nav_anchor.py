@@ -16,6 +16,7 @@ from relnav.geometry.lie import exp_se3
 from relnav.geometry.rotations import rotation_angle
 from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator
+from relnav.navigation import rigid_body as rigid_body_module
 from relnav.navigation import state as state_module
 from relnav.navigation.state import StateRecord, relative_state
 from relnav.odometry import run_sequence
@@ -140,9 +141,10 @@ def test_relnav_tumbling_preset_expands_to_the_navigator():
     assert options == {"surface": "quadric", "reanchor_frame": 25}
 
 
-def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch):
+@pytest.mark.parametrize("refine", [False, True])
+def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch, refine):
     """Euler's equations with a wild inertia fit can diverge: the first pass stands, and the
-    run's meta says why."""
+    run's meta says why (for each fit, the rates' and the attitudes')."""
     calls = {"n": 0}
     real_run = state_module.Tracker.run
 
@@ -156,16 +158,18 @@ def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch):
         inertia=np.diag([1.0, 2.0, 3.0]), principal=np.array([1.0, 2.0, 3.0]), residual=1e-4
     )
     monkeypatch.setattr(state_module.Tracker, "run", failing_second_pass)
-    monkeypatch.setattr(state_module, "fit_inertia", lambda *a, **k: fit)
+    monkeypatch.setattr(rigid_body_module, "fit_inertia", lambda *a, **k: fit)
+    monkeypatch.setattr(rigid_body_module, "refine_inertia", lambda *a, **k: fit)
     w = 0.02  # rad/s about z
     frames = [
         StateRecord("first" if k == 0 else "ok", exp_se3(np.r_[0, 0, 0, 0, 0, w * k]), np.eye(6))
         for k in range(30)
     ]
     run = SimpleNamespace(steps=frames, timestamps=np.arange(30.0), method="relnav")
-    res = relative_state(run, rigid_body=True)
-    assert calls["n"] == 2
-    assert "zero norm" in res.meta["inertia_rejected"]
+    res = relative_state(run, rigid_body=True, inertia_refine=refine)
+    assert calls["n"] == 3 if refine else 2
+    assert res.meta["inertia_rejected"].count("zero norm") == (2 if refine else 1)
+    assert "inertia_source" not in res.meta
     assert np.all(np.isfinite(res.omega))
 
 

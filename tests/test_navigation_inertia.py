@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
 from relnav.fusion.ukf import TwistorUKF, euler_rates
-from relnav.navigation.inertia import fit_inertia, rate_sweep_deg
+from relnav.navigation.inertia import InertiaFit, fit_inertia, rate_sweep_deg, refine_inertia
 
 
 def _tumble(J: np.ndarray, w0: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -64,6 +64,47 @@ def test_fit_inertia_recovers_the_shape_of_a_tumble(rng):
         fit_inertia(t, w[:, :2])
     with pytest.raises(InputError):
         fit_inertia(t, w, window_s=0.0)
+
+
+def _attitudes(w: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Body attitudes ``R_sensor_body`` (xyzw) of a sensor holding an inertial attitude, turned
+    by the mean rate of each step (as the UKF does)."""
+    R = [Rotation.identity()]
+    for k in range(1, len(t)):
+        R.append(R[-1] * Rotation.from_rotvec(0.5 * (w[k - 1] + w[k]) * (t[k] - t[k - 1])))
+    return np.stack([r.as_quat() for r in R])
+
+
+def test_refine_inertia_reads_the_shape_from_the_attitudes(rng):
+    """A rate fit whose smallest moment is 29 % off (a lagging filter's) is brought back to the
+    tumble's shape by the attitudes; observation outliers do not pull it away."""
+    J = _body_inertia(rng)
+    true = np.linalg.eigvalsh(J / np.linalg.det(J) ** (1.0 / 3.0))
+    t = np.arange(0.0, 380.0, 2.0)
+    w = _tumble(J, np.radians([0.3, 0.4, 1.2]), t)
+    q = _attitudes(w, t)
+    noise = Rotation.from_rotvec(rng.normal(scale=np.radians(0.3), size=(len(t), 3)))
+    observed = (Rotation.from_quat(q) * noise).as_quat()
+    observed[::17] = (Rotation.from_quat(q[::17]) * Rotation.from_rotvec([0.2, 0.0, 0.0])).as_quat()
+    observed[5::9] = np.nan
+    lam, V = np.linalg.eigh(J)
+    biased = (V * (lam * [0.6, 1.0, 1.0])) @ V.T
+    start = InertiaFit(biased / np.linalg.det(biased) ** (1.0 / 3.0), 1e-5, 90.0)
+    assert abs(start.principal[0] / true[0] - 1.0) > 0.25
+    rates = w + rng.normal(scale=np.radians(0.01), size=w.shape)
+    fit = refine_inertia(start, t, observed, q, rates)
+    assert fit is not None
+    np.testing.assert_allclose(fit.principal, true, rtol=0.03)
+    assert np.linalg.det(fit.inertia) == pytest.approx(1.0)
+    assert 0.0 < fit.residual < np.radians(0.002)
+    # too few observed attitudes: no refinement; shapes are checked
+    few = np.full_like(observed, np.nan)
+    few[:11] = observed[:11]
+    assert refine_inertia(start, t, few, q, rates) is None
+    with pytest.raises(InputError):
+        refine_inertia(start, t, observed[:, :3], q, rates)
+    with pytest.raises(InputError):
+        refine_inertia(start, t, observed, q[:-1], rates)
 
 
 def test_ukf_inertia_option_turns_the_rate_and_is_checked(rng):
@@ -126,3 +167,44 @@ def test_relative_state_rigid_body_identifies_a_tumbling_targets_inertia(rng):
         return float(np.sqrt(np.mean(np.sum(res.errors()["omega"][k0:] ** 2, axis=1))))
 
     assert rate_rms(rigid) < 0.5 * rate_rms(first)
+
+
+def test_rigid_body_pass_keeps_the_likelier_second_pass(monkeypatch):
+    """Of the passes with the rates' and the attitudes' inertia, the one whose innovations are
+    the likelier over the steps both have one is kept; without refinement, the rates' pass."""
+    from types import SimpleNamespace
+
+    from relnav.navigation import rigid_body
+
+    rates_fit = InertiaFit(np.diag([0.5, 1.0, 2.0]), 1e-5, 30.0)
+    attitudes_fit = InertiaFit(np.diag([0.4, 1.25, 2.0]), 2e-5, 30.0)
+    monkeypatch.setattr(rigid_body, "fit_inertia", lambda *a, **k: rates_fit)
+    monkeypatch.setattr(rigid_body, "refine_inertia", lambda *a, **k: attitudes_fit)
+    K = 6
+    first = SimpleNamespace(
+        time=np.arange(K, dtype=float),
+        omega=np.zeros((K, 3)),
+        quat=np.tile([0.0, 0.0, 0.0, 1.0], (K, 1)),
+        observed=np.zeros((K, 7)),
+    )
+    # the attitudes' pass is likelier on the common steps; the rates' pass lacks step 5,
+    # where the attitudes' pass is very unlikely (not counted)
+    ll = {
+        id(rates_fit): np.array([np.nan, -3.0, -3.0, -3.0, -3.0, np.nan]),
+        id(attitudes_fit): np.array([np.nan, -2.0, -2.0, -2.0, -2.0, -100.0]),
+    }
+
+    def run_pass(fit):
+        return SimpleNamespace(
+            omega=np.zeros((K, 3)), quat=first.quat, log_likelihood=ll[id(fit)], fit=fit
+        )
+
+    kept, meta = rigid_body.rigid_body_pass(first, run_pass, skip=1)
+    assert kept.fit is attitudes_fit and meta["inertia_source"] == "attitudes"
+    assert meta["inertia_log_likelihood"] == {"rates": -12.0, "attitudes": -8.0}
+    np.testing.assert_allclose(meta["principal_inertia"], attitudes_fit.principal)
+    ll[id(attitudes_fit)][1] = -10.0
+    kept, meta = rigid_body.rigid_body_pass(first, run_pass, skip=1)
+    assert kept.fit is rates_fit and meta["inertia_source"] == "rates"
+    kept, meta = rigid_body.rigid_body_pass(first, run_pass, skip=1, refine=False)
+    assert kept.fit is rates_fit and "inertia_log_likelihood" not in meta

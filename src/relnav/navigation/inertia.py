@@ -25,15 +25,20 @@ References: ``docs/results/nav/state_hold_point.md`` (the tumbling sequences).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import trapezoid
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from relnav.errors import InputError
+from relnav.fusion.pose_filter import _canon_q, quat_delta
 from relnav.fusion.ukf import torque_free_acceleration
+from relnav.geometry.dualquat import _qmul
 
-__all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg"]
+__all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg", "refine_inertia"]
 
 log = logging.getLogger(__name__)
 
@@ -161,3 +166,154 @@ def fit_inertia(
         drift = w[b] - w[a] - trapezoid(w_dot, t[a : b + 1], axis=0)
         miss.append(drift / (t[b] - t[a]))
     return InertiaFit(J, float(np.sqrt(np.mean(np.square(miss)))), sweep)
+
+
+def _rate_miss(t: np.ndarray, w: np.ndarray, J: np.ndarray, window_s: float) -> float:
+    """RMS per axis of the mean angular acceleration (rad/s²) that the torque-free model with
+    inertia ``J`` misses over windows of ``window_s`` s of the rates ``w`` ``(K, 3)``."""
+    miss = []
+    for k in range(len(t)):
+        a = int(np.searchsorted(t, t[k] - 0.5 * window_s))
+        b = int(np.searchsorted(t, t[k] + 0.5 * window_s, side="right")) - 1
+        if a >= k or b <= k:
+            continue
+        w_dot = torque_free_acceleration(w[a : b + 1], J)
+        miss.append((w[b] - w[a] - trapezoid(w_dot, t[a : b + 1], axis=0)) / (t[b] - t[a]))
+    return float(np.sqrt(np.mean(np.square(miss)))) if miss else float("nan")
+
+
+def _inertias(p: np.ndarray, V0: np.ndarray) -> np.ndarray:
+    """Inertias ``(m, 3, 3)`` (det 1) of parameters ``p`` ``(m, ≥ 11)``: columns 6–8 turn the
+    principal axes ``V0`` (rotation vector), columns 9–10 are two log principal moments."""
+    R = Rotation.from_rotvec(p[:, 6:9]).as_matrix() @ V0
+    m = np.exp(np.column_stack([p[:, 9], p[:, 10], -p[:, 9] - p[:, 10]]))
+    return np.einsum("nij,nj,nkj->nik", R, m, R)
+
+
+def _torque_free_attitudes(p: np.ndarray, t: np.ndarray, q0: np.ndarray, V0: np.ndarray):
+    """Attitudes ``(m, K, 4)`` (xyzw) of torque-free motions at times ``t`` ``(K,)``, one per
+    parameter row of ``p`` ``(m, 11)``: ``q0 ⊗ exp(p[:, :3])`` at ``t[0]``, body rate
+    ``p[:, 3:6]`` (rad/s) and inertia :func:`_inertias`. Propagated as
+    :class:`~relnav.fusion.ukf.TwistorUKF` does (Runge–Kutta steps of at most 1 s for the rate,
+    the attitude by the mean of a step's first and last rates)."""
+    J = _inertias(p, V0)
+    Ji = np.linalg.inv(J)
+
+    def accel(w: np.ndarray) -> np.ndarray:
+        c = np.cross(np.einsum("nij,nj->ni", J, w), w)
+        return np.einsum("nij,nj->ni", Ji, c)
+
+    q = _qmul(np.broadcast_to(q0, (len(p), 4)), Rotation.from_rotvec(p[:, :3]).as_quat())
+    w = p[:, 3:6].copy()
+    out = np.empty((len(p), len(t), 4))
+    out[:, 0] = q
+    for k in range(1, len(t)):
+        dt = float(t[k] - t[k - 1])
+        n = max(1, math.ceil(dt / 1.0))
+        h = dt / n
+        x = w
+        for _ in range(n):
+            k1 = accel(x)
+            k2 = accel(x + 0.5 * h * k1)
+            k3 = accel(x + 0.5 * h * k2)
+            k4 = accel(x + h * k3)
+            x = x + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        q = _canon_q(_qmul(q, quat_delta(0.5 * (w + x), dt)))
+        w = x
+        out[:, k] = q
+    return out
+
+
+def refine_inertia(
+    fit: InertiaFit,
+    times: np.ndarray,
+    quats: np.ndarray,
+    filtered: np.ndarray,
+    rates: np.ndarray,
+    *,
+    window_s: float = 40.0,
+) -> InertiaFit | None:
+    """An inertia fit refined on the attitudes themselves (output error).
+
+    **[interpretation]** :func:`fit_inertia` reads the shape from a filter's rates, which lag
+    the truth and carry its constant-rate model; on a near-axisymmetric tumble the precession
+    rate (and so the axial moment) comes out biased. Here the initial attitude, the initial
+    rate and the inertia (its principal axes and two moment ratios, started from ``fit``) are
+    the least-squares torque-free motion through the observed attitudes, with a robust loss
+    (soft L1 at three robust σ of the observations).
+
+    Parameters
+    ----------
+    fit : InertiaFit
+        The rate fit to start from.
+    times : (K,) float64
+        Times, s (increasing).
+    quats : (K, 4) float64
+        Observed attitudes ``R_sensor_body`` (xyzw; NaN rows skipped).
+    filtered, rates : (K, 4), (K, 3) float64
+        A filter's attitudes (xyzw) and body rates (rad/s), those ``fit`` came from: the
+        motion starts from their first row, the observations' robust σ is their spread about
+        ``filtered`` and the refined fit's residual is its miss on ``rates`` (as in
+        :func:`fit_inertia`).
+    window_s : float
+        The residual's window, s.
+
+    Returns
+    -------
+    InertiaFit or None
+        The refined fit, or None when fewer than 12 attitudes are observed or the solution
+        is not finite.
+    """
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    Q = np.asarray(quats, dtype=np.float64)
+    if Q.shape != (len(t), 4):
+        raise InputError(f"quats must be ({len(t)}, 4), got {Q.shape}")
+    ok = np.all(np.isfinite(Q), axis=1)
+    if ok.sum() < 12:
+        return None
+    F = np.asarray(filtered, dtype=np.float64)
+    w = np.asarray(rates, dtype=np.float64)
+    if F.shape != Q.shape or w.shape != (len(t), 3):
+        raise InputError(f"filtered and rates must be ({len(t)}, 4) and ({len(t)}, 3)")
+    lam, V0 = np.linalg.eigh(fit.inertia)
+    s = np.log(lam) - np.mean(np.log(lam))
+    p0 = np.r_[np.zeros(3), w[0], np.zeros(3), s[:2]]
+    conj = np.array([-1.0, -1.0, -1.0, 1.0])
+
+    def misfit(qp: np.ndarray) -> np.ndarray:  # (m, 3 n_obs), rad
+        dq = _canon_q(_qmul(qp * conj, Q[ok][None]))
+        return Rotation.from_quat(dq.reshape(-1, 4)).as_rotvec().reshape(len(qp), -1)
+
+    def residuals(P: np.ndarray) -> np.ndarray:
+        with np.errstate(over="ignore", invalid="ignore"):
+            qp = _torque_free_attitudes(P, t, F[0], V0)[:, ok]
+        bad = ~np.all(np.isfinite(qp), axis=(1, 2))
+        qp[bad] = F[0]  # a diverging motion (a wild step): far from every observation
+        r = misfit(qp)
+        r[bad] = np.pi
+        return r
+
+    spread = misfit(F[ok][None])[0]
+    scale = max(1.4826 * float(np.median(np.abs(spread[np.isfinite(spread)]))), 1e-6)
+    steps = np.r_[[1e-5] * 3, np.maximum(1e-6 * np.abs(p0[3:6]), 1e-9), [1e-5] * 5]
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        return residuals(p[None])[0] / scale
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        P = np.vstack([p, p + np.diag(steps)])
+        r = residuals(P) / scale
+        return ((r[1:] - r[0]) / steps[:, None]).T
+
+    # plain least squares from the rate fit (a robust loss from there converges slowly or
+    # not at all), then a robust pass from its answer
+    sol = least_squares(fun, p0, jac=jac, x_scale="jac")
+    sol = least_squares(
+        fun, sol.x, jac=jac, loss="soft_l1", f_scale=3.0, x_scale="jac", max_nfev=50
+    )
+    if not np.all(np.isfinite(sol.x)):
+        return None
+    J = _inertias(sol.x[None], V0)[0]
+    J = J / float(np.prod(np.linalg.eigvalsh(J))) ** (1.0 / 3.0)
+    good = np.all(np.isfinite(w), axis=1)
+    return InertiaFit(J, _rate_miss(t[good], w[good], J, window_s), fit.sweep_deg)

@@ -33,9 +33,10 @@ from relnav.fusion.multiple_model import mix_tracks
 from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
 from relnav.geometry.rotations import hat, matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.inertia import fit_inertia
+from relnav.navigation.inertia import InertiaFit
 from relnav.navigation.options import in_map
 from relnav.navigation.orbit import orbit_turns
+from relnav.navigation.rigid_body import rigid_body_pass
 
 __all__ = [
     "StateRecord",
@@ -245,6 +246,7 @@ def relative_state(
     torque_free_shares: Sequence[float] = TORQUE_FREE_SHARES,
     bank_floor: float = 1e-3,
     rigid_body: bool = False,
+    inertia_refine: bool = True,
     **tracker_options: Any,
 ) -> TrackResult:
     """Estimate the target's relative state from a navigator run.
@@ -311,6 +313,11 @@ def relative_state(
         ``inertia_identified`` and ``principal_inertia`` (ascending, ``det = 1``). The second
         pass uses the whole run's rates: a smoothed identification, not a causal filter.
         For a sensor holding an inertial attitude; default False.
+    inertia_refine : bool
+        With ``rigid_body``: also refine the inertia on the first pass's attitudes and keep
+        the second pass whose innovations are the likelier
+        (:func:`relnav.navigation.rigid_body.rigid_body_pass`; ``meta["inertia_source"]``;
+        default True).
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
         ``"step"`` (default): all of it, every frame. ``"map"`` **[interpretation]**: the
@@ -539,30 +546,17 @@ def relative_state(
 
     result = track(tracker_options, adaptive)
     if rigid_body:
-        # the rates of a first pass tell the inertia of a tumbling target; a second pass
-        # turns them by Euler's equations (a spin reveals none: the first pass stands)
-        skip = min(RIGID_BODY_SKIP_FRAMES, len(result) // 2)
-        fit = fit_inertia(result.time[skip:], result.omega[skip:])
-        meta["inertia_identified"] = fit is not None
-        if fit is not None:
-            meta["principal_inertia"] = fit.principal.tolist()
-            meta["inertia_residual_rad_s2"] = fit.residual
+        # the rates and attitudes of a first pass tell a tumbling target's inertia; a second
+        # pass turns the rate by Euler's equations (a spin reveals none: the first pass stands)
+        def second_pass(fit: InertiaFit) -> TrackResult:
             # the torque-free model's own miss is the angular acceleration it leaves out
             q2 = {**tracker_options["q"], "angular_acceleration": fit.residual}
             q2["torque_free"] = False
-            try:  # a diverging pass overflows: said once below, not by numpy per sigma point
-                with np.errstate(over="ignore", invalid="ignore"):
-                    second = track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
-                finite = np.all(np.isfinite(second.omega)) and np.all(np.isfinite(second.quat))
-                why = "" if finite else "non-finite states"
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
-                why = f"{type(e).__name__}: {e}"
-            if why:
-                # Euler's equations with a wild fit can diverge: the first pass stands
-                log.warning("rigid body: second pass refused (%s); first pass kept", why)
-                meta["inertia_rejected"] = why
-            else:
-                result = second
+            return track({**tracker_options, "q": q2, "inertia": fit.inertia}, False)
+
+        skip = min(RIGID_BODY_SKIP_FRAMES, len(result) // 2)
+        result, found = rigid_body_pass(result, second_pass, skip=skip, refine=inertia_refine)
+        meta.update(found)
         result.meta.update(meta)
     if offset_mode:
         result = with_map_rotation_offset(result, map_offset_rotation(frames, offset_frames))
