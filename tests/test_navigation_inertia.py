@@ -41,6 +41,9 @@ def test_euler_rates_is_the_torque_free_motion(rng):
     assert np.linalg.norm(J @ out) == pytest.approx(np.linalg.norm(J @ w0), rel=1e-9)
     assert out @ J @ out == pytest.approx(w0 @ J @ w0, rel=1e-9)
     np.testing.assert_allclose(euler_rates(w0[None], np.eye(3), 7.0)[0], w0)
+    # one inertia per rate: the same motions
+    both = euler_rates(np.stack([w0, 2.0 * w0]), np.stack([J, np.eye(3)]), 7.0)
+    np.testing.assert_allclose(both, [out, 2.0 * w0], atol=1e-12)
 
 
 def test_fit_inertia_recovers_the_shape_of_a_tumble(rng):

@@ -148,15 +148,19 @@ def _inertia_tensor(value: Any) -> np.ndarray:
 
 def torque_free_acceleration(w: np.ndarray, J: np.ndarray) -> np.ndarray:
     """Euler's torque-free angular acceleration ``ω̇ = J⁻¹((Jω) × ω)`` ``(n, 3)`` rad/s² of
-    body rates ``w`` ``(n, 3)`` rad/s, inertia ``J`` ``(3, 3)`` symmetric (any scale)."""
+    body rates ``w`` ``(n, 3)`` rad/s, inertia ``J`` ``(3, 3)`` symmetric (any scale), or one
+    inertia per rate ``(n, 3, 3)``."""
     J = np.asarray(J, dtype=np.float64)
-    return np.linalg.solve(J, np.cross(w @ J, w).T).T
+    if J.ndim == 2:
+        return np.linalg.solve(J, np.cross(w @ J, w).T).T
+    c = np.cross(np.einsum("nij,nj->ni", J, w), w)
+    return np.linalg.solve(J, c[:, :, None])[:, :, 0]
 
 
 def euler_rates(w: np.ndarray, J: np.ndarray, dt: float, max_step: float = 1.0) -> np.ndarray:
     """Body rates ``(n, 3)`` rad/s after ``dt`` s of torque-free motion from ``w`` ``(n, 3)``
-    (:func:`torque_free_acceleration`, inertia ``J`` ``(3, 3)``; classical Runge–Kutta,
-    steps of at most ``max_step`` s)."""
+    (:func:`torque_free_acceleration`, inertia ``J`` ``(3, 3)`` or ``(n, 3, 3)``; classical
+    Runge–Kutta, steps of at most ``max_step`` s)."""
 
     def rate(x: np.ndarray) -> np.ndarray:
         return torque_free_acceleration(x, J)

@@ -25,7 +25,6 @@ References: ``docs/results/nav/state_hold_point.md`` (the tumbling sequences).
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from relnav.errors import InputError
 from relnav.fusion.pose_filter import _canon_q, quat_delta
-from relnav.fusion.ukf import torque_free_acceleration
+from relnav.fusion.ukf import euler_rates, torque_free_acceleration
 from relnav.geometry.dualquat import _qmul
 
 __all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg", "refine_inertia"]
@@ -135,7 +134,7 @@ def fit_inertia(
     if sweep < min_sweep_deg:
         log.debug("rate sweeps %.1f deg in the body: inertia not identifiable", sweep)
         return None
-    rows, spans = [], []
+    rows = []
     for k in range(len(t)):
         # Euler's equations integrated over a window [a, b] (no derivative of noisy rates):
         # J (ω_b − ω_a) = ∫ (J ω) × ω dt, linear in J, the integral by the trapezoid rule
@@ -148,7 +147,6 @@ def fit_inertia(
             torque = np.cross(w[a : b + 1] @ E, w[a : b + 1])
             A[:, i] = E @ (w[b] - w[a]) - trapezoid(torque, t[a : b + 1], axis=0)
         rows.append(A)
-        spans.append((a, b))
     if len(rows) < 3:
         return None
     _, _, Vt = np.linalg.svd(np.vstack(rows))
@@ -160,12 +158,7 @@ def fit_inertia(
         log.debug("inertia fit not positive definite (eigenvalues %s)", lam)
         return None
     J = J / float(np.prod(lam)) ** (1.0 / 3.0)
-    miss = []
-    for a, b in spans:  # the mean angular acceleration the model misses over each window
-        w_dot = torque_free_acceleration(w[a : b + 1], J)
-        drift = w[b] - w[a] - trapezoid(w_dot, t[a : b + 1], axis=0)
-        miss.append(drift / (t[b] - t[a]))
-    return InertiaFit(J, float(np.sqrt(np.mean(np.square(miss)))), sweep)
+    return InertiaFit(J, _rate_miss(t, w, J, window_s), sweep)
 
 
 def _rate_miss(t: np.ndarray, w: np.ndarray, J: np.ndarray, window_s: float) -> float:
@@ -190,34 +183,22 @@ def _inertias(p: np.ndarray, V0: np.ndarray) -> np.ndarray:
     return np.einsum("nij,nj,nkj->nik", R, m, R)
 
 
-def _torque_free_attitudes(p: np.ndarray, t: np.ndarray, q0: np.ndarray, V0: np.ndarray):
+def _torque_free_attitudes(
+    p: np.ndarray, t: np.ndarray, q0: np.ndarray, V0: np.ndarray
+) -> np.ndarray:
     """Attitudes ``(m, K, 4)`` (xyzw) of torque-free motions at times ``t`` ``(K,)``, one per
     parameter row of ``p`` ``(m, 11)``: ``q0 ⊗ exp(p[:, :3])`` at ``t[0]``, body rate
     ``p[:, 3:6]`` (rad/s) and inertia :func:`_inertias`. Propagated as
     :class:`~relnav.fusion.ukf.TwistorUKF` does (Runge–Kutta steps of at most 1 s for the rate,
     the attitude by the mean of a step's first and last rates)."""
     J = _inertias(p, V0)
-    Ji = np.linalg.inv(J)
-
-    def accel(w: np.ndarray) -> np.ndarray:
-        c = np.cross(np.einsum("nij,nj->ni", J, w), w)
-        return np.einsum("nij,nj->ni", Ji, c)
-
     q = _qmul(np.broadcast_to(q0, (len(p), 4)), Rotation.from_rotvec(p[:, :3]).as_quat())
     w = p[:, 3:6].copy()
     out = np.empty((len(p), len(t), 4))
     out[:, 0] = q
     for k in range(1, len(t)):
         dt = float(t[k] - t[k - 1])
-        n = max(1, math.ceil(dt / 1.0))
-        h = dt / n
-        x = w
-        for _ in range(n):
-            k1 = accel(x)
-            k2 = accel(x + 0.5 * h * k1)
-            k3 = accel(x + 0.5 * h * k2)
-            k4 = accel(x + h * k3)
-            x = x + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x = euler_rates(w, J, dt)
         q = _canon_q(_qmul(q, quat_delta(0.5 * (w + x), dt)))
         w = x
         out[:, k] = q
