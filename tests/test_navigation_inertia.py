@@ -104,6 +104,9 @@ def test_refine_inertia_reads_the_shape_from_the_attitudes(rng):
     few = np.full_like(observed, np.nan)
     few[:11] = observed[:11]
     assert refine_inertia(start, t, few, q, rates) is None
+    unset = rates.copy()
+    unset[0] = np.nan
+    assert refine_inertia(start, t, observed, q, unset) is None
     with pytest.raises(InputError):
         refine_inertia(start, t, observed[:, :3], q, rates)
     with pytest.raises(InputError):

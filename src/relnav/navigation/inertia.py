@@ -242,8 +242,8 @@ def refine_inertia(
     Returns
     -------
     InertiaFit or None
-        The refined fit, or None when fewer than 12 attitudes are observed or the solution
-        is not finite.
+        The refined fit, or None when fewer than 12 attitudes are observed, the filter's first
+        row is not finite or the solution is not finite.
     """
     t = np.asarray(times, dtype=np.float64).reshape(-1)
     Q = np.asarray(quats, dtype=np.float64)
@@ -256,6 +256,8 @@ def refine_inertia(
     w = np.asarray(rates, dtype=np.float64)
     if F.shape != Q.shape or w.shape != (len(t), 3):
         raise InputError(f"filtered and rates must be ({len(t)}, 4) and ({len(t)}, 3)")
+    if not (np.all(np.isfinite(F[0])) and np.all(np.isfinite(w[0]))):
+        return None  # no filter state to start the motion from
     lam, V0 = np.linalg.eigh(fit.inertia)
     s = np.log(lam) - np.mean(np.log(lam))
     p0 = np.r_[np.zeros(3), w[0], np.zeros(3), s[:2]]
