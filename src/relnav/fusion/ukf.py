@@ -146,24 +146,30 @@ def _inertia_tensor(value: Any) -> np.ndarray:
     return J / float(np.prod(lam)) ** (1.0 / 3.0)
 
 
-def torque_free_acceleration(w: np.ndarray, J: np.ndarray) -> np.ndarray:
+def torque_free_acceleration(
+    w: np.ndarray, J: np.ndarray, J_inv: np.ndarray | None = None
+) -> np.ndarray:
     """Euler's torque-free angular acceleration ``ω̇ = J⁻¹((Jω) × ω)`` ``(n, 3)`` rad/s² of
     body rates ``w`` ``(n, 3)`` rad/s, inertia ``J`` ``(3, 3)`` symmetric (any scale), or one
-    inertia per rate ``(n, 3, 3)``."""
+    inertia per rate ``(n, 3, 3)`` (then ``J_inv``, their inverses, when already known)."""
     J = np.asarray(J, dtype=np.float64)
     if J.ndim == 2:
         return np.linalg.solve(J, np.cross(w @ J, w).T).T
     c = np.cross(np.einsum("nij,nj->ni", J, w), w)
-    return np.linalg.solve(J, c[:, :, None])[:, :, 0]
+    if J_inv is None:
+        return np.linalg.solve(J, c[:, :, None])[:, :, 0]
+    return np.einsum("nij,nj->ni", J_inv, c)
 
 
 def euler_rates(w: np.ndarray, J: np.ndarray, dt: float, max_step: float = 1.0) -> np.ndarray:
     """Body rates ``(n, 3)`` rad/s after ``dt`` s of torque-free motion from ``w`` ``(n, 3)``
     (:func:`torque_free_acceleration`, inertia ``J`` ``(3, 3)`` or ``(n, 3, 3)``; classical
     Runge–Kutta, steps of at most ``max_step`` s)."""
+    J = np.asarray(J, dtype=np.float64)
+    J_inv = np.linalg.inv(J) if J.ndim == 3 else None  # one inverse for the four stages
 
     def rate(x: np.ndarray) -> np.ndarray:
-        return torque_free_acceleration(x, J)
+        return torque_free_acceleration(x, J, J_inv)
 
     dt = max(float(dt), 0.0)
     n = max(1, math.ceil(dt / max_step))
