@@ -245,6 +245,12 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
         + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, pooled[:4], strict=True))
         + f"; 12-dim {pooled[4]:.1f}"
     )
+    given = np.nanmean(np.concatenate([r.nees_conditional()[k0:] for r in results]), axis=0)
+    print(
+        "  pooled mean NEES per block given the other nine components (3 = consistent; above: "
+        "the block is coupled to the rest more tightly than its errors are): "
+        + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, given, strict=True))
+    )
     report_tracked(B, ape[:, 0], w.reshape(n, -1))
     report_inertia(results)
     E = np.stack([np.concatenate([e[b][k0:] for b in BLOCKS], axis=1) for e in errs])

@@ -9,9 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from relnav.errors import ConfigError, InputError
+from relnav.fusion.track_result import TrackResult, TrackTruth
 from relnav.fusion.tracker import Observation, Tracker, simulate_observations
 from relnav.fusion.ukf import TwistorUKF
 
@@ -297,6 +299,64 @@ def test_nees_blocks_are_the_blocks_of_the_full_nees() -> None:
     assert est.sum() >= 10
     np.testing.assert_allclose(blocks[est].sum(axis=1), full[est], rtol=1e-9)
     assert np.all(np.isnan(blocks[~est]))
+
+
+def _track_with_errors(err: np.ndarray, C: np.ndarray) -> TrackResult:
+    """A track whose errors against a still truth are ``err`` ``(K, 12)`` (position, velocity,
+    attitude rotation vector, ω) and whose covariance is ``C`` ``(12, 12)`` at every step."""
+    K = len(err)
+    zeros = np.zeros((K, 3))
+    unit = np.tile([0.0, 0.0, 0.0, 1.0], (K, 1))
+    truth = TrackTruth(zeros, zeros, unit, zeros)
+    return TrackResult(
+        time=np.arange(K, dtype=float),
+        position=err[:, 0:3],
+        velocity=err[:, 3:6],
+        quat=Rotation.from_rotvec(err[:, 6:9]).as_quat(),
+        omega=err[:, 9:12],
+        covariance=np.tile(C, (K, 1, 1)),
+        status=["update"] * K,
+        nis=np.full(K, np.nan),
+        observed=np.ones(K, dtype=bool),
+        filter="ukf",
+        truth=truth,
+    )
+
+
+def test_nees_conditional_finds_a_coupling_tighter_than_the_errors() -> None:
+    """Errors drawn independently with unit variance: against a covariance with those unit
+    variances but attitude and ω correlated at 0.99 (a filter sure that one follows the
+    other), every block's own NEES is about 3, while the attitude's and ω's given the rest are
+    far above 3; against the identity all are about 3. The 12-dim NEES is one block's NEES
+    given the rest plus the rest's own."""
+    rng = np.random.default_rng(4)
+    K = 4000
+    err = 0.01 * rng.standard_normal((K, 12))
+    C = 1e-4 * np.eye(12)
+    honest = _track_with_errors(err, C)
+    assert np.allclose(np.nanmean(honest.nees_conditional(), axis=0), 3.0, atol=0.2)
+    tight = C.copy()
+    tight[6:9, 9:12] = tight[9:12, 6:9] = 0.99e-4 * np.eye(3)
+    track = _track_with_errors(err, tight)
+    own = np.nanmean(track.nees_blocks(), axis=0)
+    given = np.nanmean(track.nees_conditional(), axis=0)
+    assert np.allclose(own, 3.0, atol=0.2)
+    assert np.allclose(given[:2], 3.0, atol=0.2)  # position and velocity are not coupled
+    assert np.all(given[2:] > 30.0)  # expected 3 · 2/(1 − 0.99²) ≈ 300
+    others = np.r_[0:6, 9:12]  # the rest of the attitude block
+    e = err[:, others]
+    rest = np.einsum("ki,ij,kj->k", e, np.linalg.inv(tight[np.ix_(others, others)]), e)
+    np.testing.assert_allclose(track.nees_conditional()[:, 2] + rest, track.nees(), rtol=1e-6)
+
+
+def test_nees_conditional_is_nan_without_an_estimate() -> None:
+    """Steps whose covariance is not finite give NaN, as the other NEES do."""
+    err = np.full((3, 12), 0.01)
+    track = _track_with_errors(err, 1e-4 * np.eye(12))
+    track.covariance[1] = np.nan
+    out = track.nees_conditional()
+    assert out.shape == (3, 4)
+    assert np.all(np.isnan(out[1])) and np.all(np.isfinite(out[[0, 2]]))
 
 
 def _views_sources(n: int, per: int = 16, width: int = 2) -> np.ndarray:
