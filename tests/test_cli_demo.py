@@ -61,7 +61,9 @@ def test_odometry_runs_the_navigator_by_default(tmp_path):
     assert len((out / "estimate.tum").read_text().splitlines()) == 4
     for name in ("state.csv", "state.png", "state_errors.png"):  # the full relative state
         assert (out / name).is_file(), name
-    assert "state" in json.loads((out / "metrics.json").read_text())
+    state = json.loads((out / "metrics.json").read_text())["state"]
+    for key in ("nees_blocks_mean", "nees_given_rest_mean"):  # each block alone, given the rest
+        assert set(state[key]) == {"position", "velocity", "attitude", "omega"}, key
     quiet = tmp_path / "quiet"
     res = CliRunner().invoke(app, ["odometry", str(seq), "--out", str(quiet), "--no-state"])
     assert res.exit_code == 0, res.output

@@ -43,6 +43,17 @@ STATE_MAX_FRAMES = 5000
 1.7 kB per frame in memory."""
 
 
+def _block_means(values: Any) -> dict[str, float | None]:
+    """Mean of each column of ``values`` ``(K, 4)`` over its finite steps, by block name."""
+    import numpy as np
+
+    out: dict[str, float | None] = {}
+    for name, col in zip(("position", "velocity", "attitude", "omega"), values.T, strict=True):
+        col = col[np.isfinite(col)]
+        out[name] = float(np.mean(col)) if len(col) else None
+    return out
+
+
 def write_state_outputs(
     out: Path,
     run: Any,
@@ -82,6 +93,9 @@ def write_state_outputs(
             "velocity_rms_m_s": summary["velocity"]["rms"],
             "nees_mean": float(np.mean(nees)) if len(nees) else None,
             "nees_band_95": list(nees_band(len(nees))) if len(nees) else None,
+            # each 3-dim block alone and given the other nine (3 when consistent)
+            "nees_blocks_mean": _block_means(result.nees_blocks()[k0:]),
+            "nees_given_rest_mean": _block_means(result.nees_conditional()[k0:]),
         }
     return names
 
