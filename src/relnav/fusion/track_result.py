@@ -286,11 +286,10 @@ class TrackResult:
         err = self._state_errors()
         out = np.full((len(self), 4), np.nan)
         idx = np.arange(12)
+        blocks = [(idx[3 * b : 3 * b + 3], np.r_[idx[: 3 * b], idx[3 * b + 3 :]]) for b in range(4)]
         for k in self._estimated_steps(err):
             C = self.covariance[k]
-            for b in range(4):
-                i = idx[3 * b : 3 * b + 3]
-                o = np.setdiff1d(idx, i)
+            for b, (i, o) in enumerate(blocks):
                 G = np.linalg.solve(C[np.ix_(o, o)], C[np.ix_(o, i)]).T  # C_bo C_oo⁻¹
                 Cc = C[np.ix_(i, i)] - G @ C[np.ix_(o, i)]
                 ec = err[k, i] - G @ err[k, o]
