@@ -135,13 +135,9 @@ def fit_inertia(
         log.debug("rate sweeps %.1f deg in the body: inertia not identifiable", sweep)
         return None
     rows = []
-    for k in range(len(t)):
+    for a, b in _windows(t, window_s):
         # Euler's equations integrated over a window [a, b] (no derivative of noisy rates):
         # J (ω_b − ω_a) = ∫ (J ω) × ω dt, linear in J, the integral by the trapezoid rule
-        a = int(np.searchsorted(t, t[k] - 0.5 * window_s))
-        b = int(np.searchsorted(t, t[k] + 0.5 * window_s, side="right")) - 1
-        if a >= k or b <= k:
-            continue
         A = np.empty((3, 6))
         for i, E in enumerate(_BASIS):
             torque = np.cross(w[a : b + 1] @ E, w[a : b + 1])
@@ -161,15 +157,23 @@ def fit_inertia(
     return InertiaFit(J, _rate_miss(t, w, J, window_s), sweep)
 
 
+def _windows(t: np.ndarray, window_s: float) -> list[tuple[int, int]]:
+    """First and last indices ``(a, b)`` of the window of ``window_s`` s centred on each time of
+    ``t`` (increasing), for the times with samples on both sides within it."""
+    out = []
+    for k in range(len(t)):
+        a = int(np.searchsorted(t, t[k] - 0.5 * window_s))
+        b = int(np.searchsorted(t, t[k] + 0.5 * window_s, side="right")) - 1
+        if a < k < b:
+            out.append((a, b))
+    return out
+
+
 def _rate_miss(t: np.ndarray, w: np.ndarray, J: np.ndarray, window_s: float) -> float:
     """RMS per axis of the mean angular acceleration (rad/s²) that the torque-free model with
     inertia ``J`` misses over windows of ``window_s`` s of the rates ``w`` ``(K, 3)``."""
     miss = []
-    for k in range(len(t)):
-        a = int(np.searchsorted(t, t[k] - 0.5 * window_s))
-        b = int(np.searchsorted(t, t[k] + 0.5 * window_s, side="right")) - 1
-        if a >= k or b <= k:
-            continue
+    for a, b in _windows(t, window_s):
         w_dot = torque_free_acceleration(w[a : b + 1], J)
         miss.append((w[b] - w[a] - trapezoid(w_dot, t[a : b + 1], axis=0)) / (t[b] - t[a]))
     return float(np.sqrt(np.mean(np.square(miss)))) if miss else float("nan")
