@@ -284,13 +284,19 @@ def refine_inertia(
     scale = max(1.4826 * float(np.median(np.abs(spread[np.isfinite(spread)]))), 1e-6)
     steps = np.r_[[1e-5] * 3, np.maximum(1e-6 * np.abs(p0[3:6]), 1e-9), [1e-5] * 5]
 
+    last: dict[str, np.ndarray] = {}  # least_squares asks for the Jacobian where fun just ran
+
     def fun(p: np.ndarray) -> np.ndarray:
-        return residuals(p[None])[0] / scale
+        last["p"], last["r"] = p.copy(), residuals(p[None])[0] / scale
+        return last["r"]
 
     def jac(p: np.ndarray) -> np.ndarray:
-        P = np.vstack([p, p + np.diag(steps)])
-        r = residuals(P) / scale
-        return ((r[1:] - r[0]) / steps[:, None]).T
+        if "p" in last and np.array_equal(last["p"], p):
+            r0, r = last["r"], residuals(p + np.diag(steps)) / scale
+        else:
+            r = residuals(np.vstack([p, p + np.diag(steps)])) / scale
+            r0, r = r[0], r[1:]
+        return ((r - r0) / steps[:, None]).T
 
     # plain least squares from the rate fit (a robust loss from there converges slowly or
     # not at all), then a robust pass from its answer
