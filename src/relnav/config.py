@@ -171,6 +171,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "loop_kernel": (0, False, None, False),
     "loop_info_scale": (0, False, None, False),
     "loop_prior_scale": (0, True, None, False),
+    "revisit_alarm_chi2": (0, True, None, False),
     "lost_after": (1, True, None, False),
     "reloc_every": (1, True, None, False),
     "reloc_radius": (0, False, None, False),

@@ -57,11 +57,12 @@ from relnav.navigation.gicp import (
     variance_factor,
 )
 from relnav.navigation.motion import ConstantVelocityFilter
-from relnav.navigation.options import NavigatorConfig, in_map
+from relnav.navigation.options import NavigatorConfig, in_map, loop_closer_options
 from relnav.navigation.orbit import OrbitCorrection, correct_azimuth
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
+from relnav.navigation.revisit_check import RevisitCheck
 from relnav.navigation.symmetry import (
     SymmetryAxis,
     marginalise_direction,
@@ -169,6 +170,7 @@ class Navigator:
         )
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
         self.loop_closer: LoopCloser | None = None
+        self.revisits: RevisitCheck | None = None
         self.relocalizer = Relocalizer(self) if self.config.relocalise else None
         c = self.config
         mv.check_window_options(c)
@@ -223,7 +225,7 @@ class Navigator:
         self.pose = self._initial_pose.copy()
         self.n_frames, self._online, self._times, self._rescaled = 0, [], [], False
         self._boot_velocity = (v, P_vv)
-        self.loop_closer = None
+        self.loop_closer, self.revisits = None, None
         self.symmetry, self._sym_count = None, 0
         self.repeats = RepeatedPoints(self)
         if self.relocalizer is not None:
@@ -438,41 +440,41 @@ class Navigator:
         )
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
-        """Record the frame for the pose graph (``loop_closure``): its scan and its step's
-        covariance; the time it takes is added to the frame's."""
+        """Record the frame for the pose graph (``loop_closure``) and the revisit test
+        (``revisit_alarm_chi2``): its scan and its step's covariance; while the revisit alarm
+        stands an ``ok`` step is ``flagged``. The time it takes is added to the frame's."""
         c = self.config
-        if not c.loop_closure or self.map is None:
+        if not (c.loop_closure or c.revisit_alarm_chi2 > 0) or self.map is None:
             return out
         ts = time.perf_counter()
         if self.loop_closer is None:
             self.loop_closer = LoopCloser(
                 self.map.voxel_size,
                 self._map_options(),
-                every=c.keyframe_every,
-                window=c.keyframe_window,
-                min_separation=c.loop_min_separation,
-                max_distance=c.loop_max_distance,
-                max_angle_deg=c.loop_max_angle_deg,
-                min_overlap=c.loop_min_overlap,
-                max_rms=c.loop_max_rms,
-                chi2_gate=c.loop_chi2_gate,
-                min_degeneracy=c.min_degeneracy,
-                kernel=c.kernel,
-                kernel_start=c.kernel_start,
-                kernel_decay=c.kernel_decay,
-                max_iter=c.max_iter,
-                tolerance=c.tolerance,
-                graph_kernel=c.loop_kernel,
-                info_scale=c.loop_info_scale,
-                prior_scale=c.loop_prior_scale,
+                **loop_closer_options(c),
                 fallback_sigma=self._first_sigma,
             )
+            if c.revisit_alarm_chi2 > 0:
+                self.revisits = RevisitCheck(self.loop_closer, c.revisit_alarm_chi2)
         cov = out.result.info.get("step_covariance") if out.result is not None else None
         Pm = None if P is None else even_subset(P, c.max_map_points)
-        P_pose = self.motion.P[:6, :6] if self.motion is not None else None
-        self.loop_closer.observe(self.n_frames - 1, in_map(out), Pm, cov, P_pose)
+        if c.loop_closure:
+            P_pose = self.motion.P[:6, :6] if self.motion is not None else None
+            self.loop_closer.observe(self.n_frames - 1, in_map(out), Pm, cov, P_pose)
+        if self.revisits is not None:
+            edge = self.revisits.observe(self.n_frames - 1, in_map(out), Pm, cov, self._pose_of)
+            if edge is not None and out.result is not None:
+                out.result.info["revisit_chi2"] = edge.chi2
+            if self.revisits.alarm is not None and out.status == "ok" and out.result is not None:
+                out.status = out.result.status = "flagged"
+                out.result.message = self.revisits.describe_alarm()
         out.time_s += time.perf_counter() - ts
         return out
+
+    def _pose_of(self, f: int) -> np.ndarray:
+        """Frame ``f``'s online pose (the start-up's refined one where it was refined)."""
+        i = f - self._f0
+        return self._prefix[i] if 0 <= i < len(self._prefix) else self._online[f]
 
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
         c = self.config
@@ -850,7 +852,7 @@ class Navigator:
             if len(poses) != len(online):  # defensive: never a trajectory of another length
                 log.warning("smoother returned %d poses for %d frames", len(poses), len(online))
                 poses = np.stack(online)
-        if self.loop_closer is not None and len(poses):
+        if self.config.loop_closure and self.loop_closer is not None and len(poses):
             corrected = self.loop_closer.correct(poses, first_frame=self._f0)
             if corrected.shape == poses.shape and np.all(np.isfinite(corrected)):
                 poses = corrected
@@ -862,13 +864,16 @@ class Navigator:
 
     def final_report(self) -> dict[str, Any]:
         """What the navigator decided once per run, for the run's record (``run.json``): the
-        orbit test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`)
-        and the start-up's multi-view refinements and re-anchoring (accepted or not, why)."""
+        orbit test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`),
+        the start-up's multi-view refinements and re-anchoring (accepted or not, why) and the
+        revisits tested (:meth:`RevisitCheck.summary`)."""
         out: dict[str, Any] = {}
         if self.orbit is not None:
             out["orbit"] = self.orbit.as_dict()
         if self.refinements:
             out["start_up"] = [dict(r) for r in self.refinements]
+        if self.revisits is not None and self.revisits.checks:
+            out["revisits"] = self.revisits.summary()
         return out
 
     def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:

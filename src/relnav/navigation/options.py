@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal
 
-__all__ = ["MERGED_STATUSES", "NavigatorConfig", "in_map"]
+__all__ = ["MERGED_STATUSES", "NavigatorConfig", "in_map", "loop_closer_options"]
 
 MERGED_STATUSES = ("ok", "first", "flagged")
 """Statuses of the navigator's frames whose pose is the registration's and whose scan went into
@@ -448,6 +448,12 @@ class NavigatorConfig:
     loop_prior_scale : float
         Factor on the information of a prior on each keyframe at its tracked pose (the
         filter's pose covariance; 0 = none).
+    revisit_alarm_chi2 : float
+        Online test of the map at revisits (:mod:`relnav.navigation.revisit_check`; 0 = off):
+        keyframes are made while tracking (``keyframe_every``, past ``keyframe_window``
+        frames), a revisit is registered as a loop edge would be, and when its χ² (6 dof)
+        against the chain exceeds this value the map is called inconsistent: every later
+        ``ok`` step is ``flagged`` until a revisit agrees again. Default: the χ² 99 % point.
     orbit_mean_motion : float
         The target orbit's mean motion ``n``, rad/s (0 = unknown, the default; low Earth orbit
         ≈ 1.13e-3). A mission input, not a tuning: when given, :meth:`Navigator.finalize` tests
@@ -538,6 +544,7 @@ class NavigatorConfig:
     loop_kernel: float = 5.0
     loop_info_scale: float = 1.0
     loop_prior_scale: float = 0.0
+    revisit_alarm_chi2: float = 16.81
     relocalise: bool = True
     lost_after: int = 3
     reloc_every: int = 1
@@ -562,3 +569,27 @@ class NavigatorConfig:
     orbit_max_symmetry: float = 0.05
     orbit_max_misfit: float = 0.005
     orbit_min_excess: float = 3.0
+
+
+def loop_closer_options(c: NavigatorConfig) -> dict[str, Any]:
+    """The :class:`~relnav.navigation.pose_graph.LoopCloser` keywords of a navigator's
+    configuration (keyframes, revisit tests, registration, pose graph)."""
+    return {
+        "every": c.keyframe_every,
+        "window": c.keyframe_window,
+        "min_separation": c.loop_min_separation,
+        "max_distance": c.loop_max_distance,
+        "max_angle_deg": c.loop_max_angle_deg,
+        "min_overlap": c.loop_min_overlap,
+        "max_rms": c.loop_max_rms,
+        "chi2_gate": c.loop_chi2_gate,
+        "min_degeneracy": c.min_degeneracy,
+        "kernel": c.kernel,
+        "kernel_start": c.kernel_start,
+        "kernel_decay": c.kernel_decay,
+        "max_iter": c.max_iter,
+        "tolerance": c.tolerance,
+        "graph_kernel": c.loop_kernel,
+        "info_scale": c.loop_info_scale,
+        "prior_scale": c.loop_prior_scale,
+    }

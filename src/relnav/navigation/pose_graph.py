@@ -73,8 +73,10 @@ __all__ = [
     "LoopEdge",
     "PoseGraph",
     "PoseGraphResult",
+    "Keyframe",
     "compose_step_covariances",
     "interpolate_corrections",
+    "revisit_candidate",
 ]
 
 log = logging.getLogger(__name__)
@@ -100,6 +102,45 @@ def compose_step_covariances(steps: list[np.ndarray], covs: list[np.ndarray]) ->
         A = adjoint(invert(S))
         C = A @ C @ A.T + Cs
     return 0.5 * (C + C.T)
+
+
+def revisit_candidate(
+    positions: np.ndarray,
+    centroids: np.ndarray,
+    min_separation: int,
+    max_distance: float,
+    max_angle: float,
+) -> int | None:
+    """The old keyframe the newest one revisits: the nearest whose sensor position is within
+    ``max_distance`` × range and whose viewing direction is within ``max_angle`` (rad) of the
+    newest's, among those at least ``min_separation`` keyframes older.
+
+    Parameters
+    ----------
+    positions, centroids : (K, 3) float64
+        Sensor positions and the submaps' centroids of the keyframes, oldest first, the newest
+        last (target frame, m).
+
+    Returns
+    -------
+    int or None
+        Index of the revisited keyframe (the first of equally near ones), or None.
+    """
+    m = len(positions) - min_separation
+    if m <= 0:
+        return None
+    p_new = positions[-1]
+    v_new = centroids[-1] - p_new
+    rng = float(np.linalg.norm(v_new))
+    if rng <= 0:
+        return None
+    d = np.linalg.norm(positions[:m] - p_new, axis=1)
+    v_old = centroids[:m] - positions[:m]
+    c = (v_old @ v_new) / np.maximum(np.linalg.norm(v_old, axis=1) * rng, 1e-12)
+    ok = (d <= max_distance * rng) & (np.arccos(np.clip(c, -1.0, 1.0)) <= max_angle)
+    if not ok.any():
+        return None
+    return int(np.flatnonzero(ok)[np.argmin(d[ok])])
 
 
 def interpolate_corrections(
@@ -165,6 +206,9 @@ class LoopEdge:
         eigenvalue ratio of the lever-arm-normalised information.
     accepted : bool
         Whether the edge passed every test.
+    supported : bool
+        Whether the registration itself has the evidence (finite, overlap, residual,
+        non-degenerate information): the tests but the χ² one.
     """
 
     old: int
@@ -176,10 +220,14 @@ class LoopEdge:
     chi2: float
     degeneracy: float
     accepted: bool
+    supported: bool = True
 
 
 @dataclass
-class _Keyframe:
+class Keyframe:
+    """A keyframe: its ``frame``, ``pose`` ``T_target_sensor``, submap ``points`` (its sensor
+    frame, m) and the submap's ``centroid`` (target frame, m)."""
+
     frame: int
     pose: np.ndarray
     points: np.ndarray
@@ -286,11 +334,11 @@ class LoopCloser:
         self.tolerance = float(tolerance)
         self.graph_kernel = float(graph_kernel)
         st, sr = fallback_sigma
-        self._fallback = np.diag([st**2] * 3 + [sr**2] * 3)
+        self.fallback_covariance = np.diag([st**2] * 3 + [sr**2] * 3)
         self._points: dict[int, np.ndarray] = {}
         self._step_cov: dict[int, np.ndarray] = {}
         self._pose_cov: dict[int, np.ndarray] = {}
-        self.keyframes: list[_Keyframe] = []
+        self.keyframes: list[Keyframe] = []
         self.loops: list[LoopEdge] = []
         self.time_observe_s = 0.0
         self.time_correct_s = 0.0
@@ -346,7 +394,7 @@ class LoopCloser:
             if len(Q) > self.max_points:
                 Q = Q[np.linspace(0, len(Q) - 1, self.max_points).astype(np.int64)]
             centroid = T[:3, :3] @ Q.mean(0) + T[:3, 3]
-            self.keyframes.append(_Keyframe(f, T.copy(), Q, centroid))
+            self.keyframes.append(Keyframe(f, T.copy(), Q, centroid))
 
     def _odometry(self, poses: np.ndarray) -> None:
         """Relative pose and covariance (composed steps) from each keyframe to the next."""
@@ -354,7 +402,7 @@ class LoopCloser:
         for a in range(len(self.keyframes) - 1):
             fa, fb = self.keyframes[a].frame, self.keyframes[a + 1].frame
             steps = [invert(poses[f - 1]) @ poses[f] for f in range(fa + 1, fb + 1)]
-            covs = [self._step_cov.get(f, self._fallback) for f in range(fa + 1, fb + 1)]
+            covs = [self._step_cov.get(f, self.fallback_covariance) for f in range(fa + 1, fb + 1)]
             self._odo.append((invert(poses[fa]) @ poses[fb], compose_step_covariances(steps, covs)))
 
     def _chain_covariance(self, j: int, k: int) -> np.ndarray:
@@ -364,37 +412,42 @@ class LoopCloser:
 
     def _candidate(self, k: int) -> int | None:
         """The old keyframe nearest to keyframe ``k`` that passes the revisit tests."""
-        new = self.keyframes[k]
-        p_new = new.pose[:3, 3]
-        v_new = new.centroid - p_new
-        rng = float(np.linalg.norm(v_new))
-        if rng <= 0:
-            return None
-        best, best_d = None, math.inf
-        for j in range(k - self.min_separation + 1):
-            old = self.keyframes[j]
-            d = float(np.linalg.norm(old.pose[:3, 3] - p_new))
-            if d > self.max_distance * rng or d >= best_d:
-                continue
-            v_old = old.centroid - old.pose[:3, 3]
-            c = float(v_old @ v_new) / max(float(np.linalg.norm(v_old)) * rng, 1e-12)
-            if math.acos(min(1.0, max(-1.0, c))) > self.max_angle:
-                continue
-            best, best_d = j, d
-        return best
+        kfs = self.keyframes[: k + 1]
+        return revisit_candidate(
+            np.array([kf.pose[:3, 3] for kf in kfs]),
+            np.array([kf.centroid for kf in kfs]),
+            self.min_separation,
+            self.max_distance,
+            self.max_angle,
+        )
 
-    def _submap(self, k: int, maps: dict[int, VoxelMap]) -> VoxelMap:
+    def _submap(self, k: int, kf: Keyframe, maps: dict[int, VoxelMap]) -> VoxelMap:
         if k not in maps:
             maps[k] = VoxelMap(self.voxel_size, **self.map_options)
-            maps[k].insert(self.keyframes[k].points, self.keyframes[k].frame)
+            maps[k].insert(kf.points, kf.frame)
         return maps[k]
 
     def _loop(self, j: int, k: int, maps: dict[int, VoxelMap]) -> LoopEdge:
-        """Register keyframes ``k`` (new) and ``j`` (old): the submap with fewer points onto the
-        voxel map of the other (its normals are better sampled)."""
-        old, new = self.keyframes[j], self.keyframes[k]
+        """Register keyframes ``k`` (new) and ``j`` (old) of :attr:`keyframes`."""
+        kfs = self.keyframes
+        return self.measure(j, k, kfs[j], kfs[k], self._chain_covariance(j, k), maps)
+
+    def measure(
+        self,
+        j: int,
+        k: int,
+        old: Keyframe,
+        new: Keyframe,
+        C_chain: np.ndarray,
+        maps: dict[int, VoxelMap],
+    ) -> LoopEdge:
+        """Register keyframe ``new`` (index ``k``) onto ``old`` (index ``j``): the submap with
+        fewer points onto the voxel map of the other (its normals are better sampled).
+
+        ``C_chain`` (6×6, right perturbation of ``T_old_new``) is the odometry's covariance
+        between them; ``maps`` caches the keyframes' voxel maps by index.
+        """
         Z0 = invert(old.pose) @ new.pose
-        C_chain = self._chain_covariance(j, k)
         opts = {
             "kernel": self.kernel,
             "kernel_start": self.kernel_start,
@@ -403,7 +456,7 @@ class LoopCloser:
             "tolerance": self.tolerance,
         }
         if len(new.points) <= len(old.points):
-            fit = register_submap(new.points, self._submap(j, maps), Z0, C_chain, **opts)
+            fit = register_submap(new.points, self._submap(j, old, maps), Z0, C_chain, **opts)
             Z = fit["T"]
             # information (left, old frame) → right perturbation of Z
             A = adjoint(Z)
@@ -411,7 +464,7 @@ class LoopCloser:
         else:
             A = adjoint(Z0)
             fit = register_submap(
-                old.points, self._submap(k, maps), invert(Z0), A @ C_chain @ A.T, **opts
+                old.points, self._submap(k, new, maps), invert(Z0), A @ C_chain @ A.T, **opts
             )
             Z = invert(fit["T"])
             # W = Z⁻¹ with a left perturbation δ: Z exp(−δ), so the information is H itself
@@ -423,13 +476,13 @@ class LoopCloser:
         except np.linalg.LinAlgError:
             chi2 = math.inf
         fit["T"] = Z
-        accepted = bool(
+        supported = bool(
             np.all(np.isfinite(fit["T"]))
             and fit["overlap"] >= self.min_overlap
             and fit["rms"] <= self.max_rms
             and fit["cond"] >= self.min_degeneracy
-            and chi2 <= self.chi2_gate
         )
+        accepted = supported and chi2 <= self.chi2_gate
         log.debug(
             "loop frame %d → %d: overlap %.2f rms %.2f χ² %.1f %s",
             new.frame,
@@ -440,7 +493,7 @@ class LoopCloser:
             "accepted" if accepted else "rejected",
         )
         return LoopEdge(
-            j, k, fit["T"], info, fit["overlap"], fit["rms"], chi2, fit["cond"], accepted
+            j, k, fit["T"], info, fit["overlap"], fit["rms"], chi2, fit["cond"], accepted, supported
         )
 
     # ------------------------------------------------------------------ offline correction
