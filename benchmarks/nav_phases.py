@@ -18,7 +18,9 @@ whose APE exceeds ``--lost`` m (default 5: a tenth of the 50 m station), the ste
 than 0.5 m or 5° and the share of them flagged, and the share of right steps flagged (the
 suite's definitions, ``nav_suite.run_method``); for the navigator, the wrong steps it did not
 flag against their own step covariance (10–90 % of their error and 1σ, their median exceedance
-probability) and what ``flag_probability`` 0.1 instead of 0.5 would flag.
+probability), what ``flag_probability`` 0.1 instead of 0.5 would flag, and how many runs over
+``--lost`` m (and under it) its revisit test found inconsistent
+(:mod:`relnav.navigation.revisit_check`).
 
 ``-O key=value`` passes an option to the navigator's methods (``relnav``, ``relnav-tumbling``;
 the peers run as they are). ``--state`` also runs the relative state (``relnav-tumbling`` with
@@ -120,6 +122,16 @@ def report(name: str, results: dict[str, list[dict[str, Any]]], lost: float) -> 
             f"({wf / max(wrong, 1):.0%}); right steps flagged {rf} "
             f"({rf / max(steps - wrong, 1):.1%})"
         )
+        if method.startswith("relnav"):
+            lost_runs = ape > lost
+            alarmed = np.array([r["revisit_alarm"] > 0 for r in rs])
+            print(
+                "    revisit alarm (the map found inconsistent): "
+                f"{int(np.sum(alarmed & lost_runs))} of the {int(lost_runs.sum())} runs "
+                f"over {lost:g} m, "
+                f"{int(np.sum(alarmed & ~lost_runs))} of the {int((~lost_runs).sum())} others; "
+                f"{sum(r['revisit_alarm'] for r in rs)} steps flagged by it"
+            )
         report_missed(rs)
 
 

@@ -483,6 +483,10 @@ def run_method(
         "right_flagged": int((~wrong & flagged).sum()),
         "ms": run.median_time_ms,
         "wall_s": wall,
+        # steps the navigator's revisit test flagged (the map found inconsistent)
+        "revisit_alarm": sum(
+            bool(s.result is not None and s.result.info.get("revisit_alarm")) for s in run.steps
+        ),
     }
     if per_step:  # arrays (not JSON): each step's error, flag, own 1σ (m) and exceedance
         info = [s.result.info if s.result is not None else {} for s in run.steps[1:]]

@@ -463,11 +463,7 @@ class Navigator:
             self.loop_closer.observe(self.n_frames - 1, in_map(out), Pm, cov, P_pose)
         if self.revisits is not None:
             edge = self.revisits.observe(self.n_frames - 1, in_map(out), Pm, cov, self._pose_of)
-            if edge is not None and out.result is not None:
-                out.result.info["revisit_chi2"] = edge.chi2
-            if self.revisits.alarm is not None and out.status == "ok" and out.result is not None:
-                out.status = out.result.status = "flagged"
-                out.result.message = self.revisits.describe_alarm()
+            self.revisits.label(out, edge)
         out.time_s += time.perf_counter() - ts
         return out
 

@@ -36,6 +36,7 @@ import numpy as np
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.pose_graph import Keyframe, LoopCloser, LoopEdge, revisit_candidate
+from relnav.odometry.odometry import OdometryStep
 
 __all__ = ["RevisitCheck", "chain_covariance"]
 
@@ -148,6 +149,19 @@ class RevisitCheck:
             else:
                 self.alarm = None
         return edge
+
+    def label(self, step: OdometryStep, edge: LoopEdge | None) -> None:
+        """Record the frame's test on its result (info ``revisit_chi2`` when a revisit was
+        tested) and, while the alarm stands, turn an ``ok`` step into ``flagged`` (info
+        ``revisit_alarm``, the alarm in its message)."""
+        if step.result is None:
+            return
+        if edge is not None:
+            step.result.info["revisit_chi2"] = edge.chi2
+        if self.alarm is not None and step.status == "ok":
+            step.status = step.result.status = "flagged"
+            step.result.message = self.describe_alarm()
+            step.result.info["revisit_alarm"] = True
 
     def summary(self) -> list[dict[str, float | int | bool]]:
         """Every revisit tested, for the run's record: frames, χ², whether the registration had
