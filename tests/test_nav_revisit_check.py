@@ -134,6 +134,20 @@ def test_a_drifting_map_raises_the_alarm_with_its_disagreement(circling):
     assert "map inconsistent since frame" in check.describe_alarm()
 
 
+def test_a_revisit_without_evidence_neither_raises_nor_clears_the_alarm(circling):
+    poses, _ = circling
+    rng = np.random.default_rng(5)
+    # a flat plate: the registration cannot fix the slide and turn in its plane (degenerate),
+    # so the drift's disagreement is not evidence
+    plate = np.column_stack([rng.uniform(-8, 8, 4000), rng.uniform(-8, 8, 4000), np.zeros(4000)])
+    drifted = [
+        exp_se3(np.array([0, 0, 0, 0, 0, math.radians(0.25 * f)])) @ T for f, T in enumerate(poses)
+    ]
+    check = _run_check(drifted, _scans(plate, poses, rng), 16.81)
+    assert check.checks and not any(e.supported for e in check.checks)
+    assert check.alarm is None
+
+
 @pytest.fixture(scope="module")
 def loop_seq(tmp_path_factory):
     """90 frames of a 64×64 flash LIDAR on 2.5 loops of an ellipse around an asteroid (revisits
