@@ -4,6 +4,7 @@ drifting trajectory, and the navigator's flags while the alarm stands."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -149,14 +150,19 @@ def test_a_revisit_without_evidence_neither_raises_nor_clears_the_alarm(circling
 
 
 @pytest.fixture(scope="module")
-def loop_seq(tmp_path_factory):
+def loop_dir(tmp_path_factory):
     """90 frames of a 64×64 flash LIDAR on 2.5 loops of an ellipse around an asteroid (revisits
     every 36 frames)."""
     out = tmp_path_factory.mktemp("nav-revisit") / "seq"
     simulate(flash_orbit("nav-revisit-test", seed=5, frames=90, dt=155.0), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def loop_seq(loop_dir):
     from relnav.io.sequences import ScanSequence
 
-    return ScanSequence(out)
+    return ScanSequence(loop_dir)
 
 
 def _statuses(seq, **options) -> tuple[Navigator, list]:
@@ -194,3 +200,29 @@ def test_navigator_flags_its_steps_while_the_revisit_alarm_stands(loop_seq):
 def test_negative_alarm_threshold_is_a_config_error():
     with pytest.raises(ConfigError, match="revisit_alarm_chi2"):
         Navigator(revisit_alarm_chi2=-1.0)
+
+
+def test_odometry_reports_the_revisit_alarm(loop_dir, tmp_path):
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+
+    args = ["odometry", str(loop_dir), "--no-state", "-O", "keyframe_every=3"]
+    args += ["-O", "loop_min_separation=6"]
+    res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "ok")])
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "ok" / "metrics.json").read_text())
+    assert m["revisit_tests"] > 0 and m["revisit_alarms"] == 0
+    assert "map inconsistent" not in res.output
+    # a zero-size test: every supported revisit fails, the run says so and flags the rest
+    res = CliRunner().invoke(
+        app, [*args, "-O", "revisit_alarm_chi2=1e-9", "--out", str(tmp_path / "alarm")]
+    )
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "alarm" / "metrics.json").read_text())
+    assert m["revisit_alarms"] > 0 and m["flagged_frames"] > 0
+    assert "map inconsistent" in res.output
+    record = json.loads((tmp_path / "alarm" / "run.json").read_text())
+    assert any(r["alarm"] for r in record["options"]["finalize"]["revisits"])
+    diagnostics = (tmp_path / "alarm" / "diagnostics.csv").read_text()
+    assert "map inconsistent since frame" in diagnostics

@@ -149,6 +149,11 @@ def write_run_outputs(
             preset=preset,
         )
         outputs.append("metrics.json")
+        if run.method == "relnav":  # the navigator's revisit test: revisits tested, failed
+            revisits = run.options.get("finalize", {}).get("revisits") or []
+            metrics.update(
+                revisit_tests=len(revisits), revisit_alarms=sum(r["alarm"] for r in revisits)
+            )
         if errors_plot:
             from relnav.eval.metrics import match_trajectories
             from relnav.eval.plots import plot_errors
@@ -370,6 +375,16 @@ def odometry(
     orbit = run.options.get("finalize", {}).get("orbit")
     if orbit is not None:
         console.print(f"orbit model: {orbit['reason']}", highlight=False)
+    revisits = run.options.get("finalize", {}).get("revisits") or []
+    if alarmed := [r for r in revisits if r["alarm"]]:
+        r = alarmed[0]
+        console.print(
+            f"[yellow]map inconsistent: frame {r['new_frame']} revisits frame {r['old_frame']} "
+            f"and disagrees with the tracked chain (χ² {r['chi2']:.1f}); {len(alarmed)} of the "
+            f"{len(revisits)} revisits tested failed and the ok steps after a failed one are "
+            "flagged (docs/navigator.md)[/]",
+            highlight=False,
+        )
     if seq.gt_poses is not None and n < 2:
         console.print(
             f"[yellow]evaluation needs at least two frames ({n} estimated): metrics skipped[/]"
