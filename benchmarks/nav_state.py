@@ -73,9 +73,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from nav_suite import MISSION, holdout, judge_steps, sequence_names, suite, tumbling_holdout
+from relnav.fusion.track_result import STATE_BLOCKS
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
-BLOCKS = ("position", "velocity", "attitude", "omega")  # TrackResult.nees_blocks order
 
 
 def rate_nees(res, k0: int) -> np.ndarray:
@@ -242,18 +242,18 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
     )
     print(
         "  pooled mean NEES per 3-dim block (3 = consistent): "
-        + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, pooled[:4], strict=True))
+        + ", ".join(f"{b} {x:.2f}" for b, x in zip(STATE_BLOCKS, pooled[:4], strict=True))
         + f"; 12-dim {pooled[4]:.1f}"
     )
     given = np.nanmean(np.concatenate([r.nees_conditional()[k0:] for r in results]), axis=0)
     print(
         "  pooled mean NEES per block given the other nine components (3 = consistent; above: "
         "the block is coupled to the rest more tightly than its errors are): "
-        + ", ".join(f"{b} {x:.2f}" for b, x in zip(BLOCKS, given, strict=True))
+        + ", ".join(f"{b} {x:.2f}" for b, x in zip(STATE_BLOCKS, given, strict=True))
     )
     report_tracked(B, ape[:, 0], w.reshape(n, -1))
     report_inertia(results)
-    E = np.stack([np.concatenate([e[b][k0:] for b in BLOCKS], axis=1) for e in errs])
+    E = np.stack([np.concatenate([e[b][k0:] for b in STATE_BLOCKS], axis=1) for e in errs])
     common = E.mean(axis=0)  # the part of each step's error shared by every run
     shares = [
         np.nanmean(np.sum(common[:, 3 * b : 3 * b + 3] ** 2, axis=1))
@@ -262,7 +262,7 @@ def report_monte_carlo(name: str, results: list, runs: str = "noise seeds") -> N
     ]
     print(
         "  share of the mean squared error common to every run: "
-        + ", ".join(f"{b} {x:.0%}" for b, x in zip(BLOCKS, shares, strict=True))
+        + ", ".join(f"{b} {x:.0%}" for b, x in zip(STATE_BLOCKS, shares, strict=True))
     )
     report_alarms(results)
 

@@ -47,8 +47,10 @@ def _block_means(values: Any) -> dict[str, float | None]:
     """Mean of each column of ``values`` ``(K, 4)`` over its finite steps, by block name."""
     import numpy as np
 
+    from relnav.fusion.track_result import STATE_BLOCKS
+
     out: dict[str, float | None] = {}
-    for name, col in zip(("position", "velocity", "attitude", "omega"), values.T, strict=True):
+    for name, col in zip(STATE_BLOCKS, values.T, strict=True):
         col = col[np.isfinite(col)]
         out[name] = float(np.mean(col)) if len(col) else None
     return out

@@ -22,9 +22,13 @@ from scipy.stats import chi2
 
 from relnav.geometry.dualquat import _qmul
 
-__all__ = ["TrackResult", "TrackTruth"]
+__all__ = ["STATE_BLOCKS", "TrackResult", "TrackTruth"]
 
 log = logging.getLogger(__name__)
+
+STATE_BLOCKS = ("position", "velocity", "attitude", "omega")
+"""The 3-dim blocks of the state error, in the order of :meth:`TrackResult.nees_blocks` and
+:meth:`TrackResult.nees_conditional`'s columns."""
 
 
 _QCONJ = np.array([-1.0, -1.0, -1.0, 1.0])
