@@ -9,6 +9,8 @@ one's measures their relative pose independently of the chain of steps between t
 disagreement with the chain, weighed by the chain's composed step covariances plus the
 registration's own (χ², 6 dof), is the test; an alarm is raised when it exceeds
 ``revisit_alarm_chi2`` and every later ``ok`` step is ``flagged`` until a revisit agrees again.
+A revisit whose registration lacks the evidence (overlap, residual, a non-degenerate
+information: the loop edge's gates but the χ²) neither raises nor clears the alarm.
 
 This is :class:`~relnav.navigation.pose_graph.LoopCloser`'s revisit test run while tracking
 (its registration, gates and χ²), on keyframes built from the past frames only, at the poses
@@ -142,13 +144,18 @@ class RevisitCheck:
         self.checks.append(edge)
         self.check_frames.append((self._frames[j], self._frames[k]))
         if edge.supported and math.isfinite(edge.chi2):
-            if edge.chi2 > self.alarm_chi2:
+            if self.failed(edge):
                 xi = log_se3(invert(invert(poses[j]) @ poses[k]) @ edge.Z)
                 gap = (float(np.linalg.norm(xi[:3])), math.degrees(float(np.linalg.norm(xi[3:]))))
                 self.alarm = (self._frames[j], self._frames[k], edge.chi2, *gap)
             else:
                 self.alarm = None
         return edge
+
+    def failed(self, edge: LoopEdge) -> bool:
+        """Whether a tested revisit raises the alarm: supported, with a finite χ² over the
+        threshold."""
+        return bool(edge.supported and math.isfinite(edge.chi2) and edge.chi2 > self.alarm_chi2)
 
     def label(self, step: OdometryStep, edge: LoopEdge | None) -> None:
         """Record the frame's test on its result (info ``revisit_chi2`` when a revisit was
@@ -170,9 +177,9 @@ class RevisitCheck:
             {
                 "old_frame": old,
                 "new_frame": new,
-                "chi2": round(float(e.chi2), 3),
+                "chi2": round(float(e.chi2), 3) if math.isfinite(e.chi2) else None,
                 "supported": bool(e.supported),
-                "alarm": bool(e.supported and e.chi2 > self.alarm_chi2),
+                "alarm": self.failed(e),
             }
             for (old, new), e in zip(self.check_frames, self.checks, strict=True)
         ]
