@@ -58,8 +58,12 @@ def test_revisit_candidate_is_the_nearest_old_keyframe_viewing_the_same_side():
     centroids = np.zeros_like(positions)  # every submap is centred on the target
     # the newest keyframe (loop 2, 330°) revisits loop 1's 330° keyframe, 12 keyframes older
     assert revisit_candidate(positions, centroids, 10, 0.15, math.radians(15)) == 11
-    # too recent: no keyframe 12 or more keyframes older than the newest qualifies but index 11
+    # a separation of 13 keyframes: index 11 (12 older) is too recent, and nothing else is near
     assert revisit_candidate(positions, centroids, 13, 0.15, math.radians(15)) is None
+    # the view must match: the same place looking the other way (its submap behind it)
+    away = centroids.copy()
+    away[-1] = 2.0 * positions[-1]
+    assert revisit_candidate(positions, away, 10, 0.15, math.radians(15)) is None
     # the place must match: moved 20 m away, nothing is near
     far = positions.copy()
     far[-1] *= 1.4
