@@ -76,6 +76,7 @@ __all__ = [
     "Keyframe",
     "compose_step_covariances",
     "interpolate_corrections",
+    "merge_submap",
     "revisit_candidate",
 ]
 
@@ -141,6 +142,23 @@ def revisit_candidate(
     if not ok.any():
         return None
     return int(np.flatnonzero(ok)[np.argmin(d[ok])])
+
+
+def merge_submap(
+    T_key: np.ndarray, scans: list[tuple[np.ndarray, np.ndarray]], max_points: int
+) -> np.ndarray:
+    """A keyframe's submap: the scans ``(pose T_target_sensor, points (n, 3) sensor frame, m)``
+    moved into the keyframe's sensor frame (pose ``T_key``) and merged, an evenly spaced subset
+    of ``max_points`` beyond that; ``(m, 3)`` m."""
+    Ti = invert(T_key)
+    parts = []
+    for T, P in scans:
+        M = Ti @ T
+        parts.append(P @ M[:3, :3].T + M[:3, 3])
+    Q = np.concatenate(parts)
+    if len(Q) > max_points:
+        Q = Q[np.linspace(0, len(Q) - 1, max_points).astype(np.int64)]
+    return Q
 
 
 def interpolate_corrections(
@@ -382,17 +400,9 @@ class LoopCloser:
             if n % self.every:
                 continue
             T = poses[f]
-            Ti = invert(T)
-            parts = []
             near = [] if f <= first_frame else frames[max(0, n - self.window) : n + self.window + 1]
-            for g in near or [f]:
-                if abs(g - f) > self.window:
-                    continue
-                M = Ti @ poses[g]
-                parts.append(self._points[g] @ M[:3, :3].T + M[:3, 3])
-            Q = np.concatenate(parts)
-            if len(Q) > self.max_points:
-                Q = Q[np.linspace(0, len(Q) - 1, self.max_points).astype(np.int64)]
+            scans = [(poses[g], self._points[g]) for g in near or [f] if abs(g - f) <= self.window]
+            Q = merge_submap(T, scans, self.max_points)
             centroid = T[:3, :3] @ Q.mean(0) + T[:3, 3]
             self.keyframes.append(Keyframe(f, T.copy(), Q, centroid))
 

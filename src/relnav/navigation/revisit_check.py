@@ -37,7 +37,13 @@ import numpy as np
 
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.pose_graph import Keyframe, LoopCloser, LoopEdge, revisit_candidate
+from relnav.navigation.pose_graph import (
+    Keyframe,
+    LoopCloser,
+    LoopEdge,
+    merge_submap,
+    revisit_candidate,
+)
 from relnav.odometry.odometry import OdometryStep
 
 __all__ = ["RevisitCheck", "chain_covariance"]
@@ -106,15 +112,8 @@ class RevisitCheck:
         if n % self.closer.every:
             return None
         T = pose_of(frame)
-        Ti = invert(T)
-        parts = []
-        for g, Pg in self._recent:
-            if frame - g <= self.closer.window:
-                M = Ti @ pose_of(g)
-                parts.append(Pg @ M[:3, :3].T + M[:3, 3])
-        Q = np.concatenate(parts)
-        if len(Q) > self.closer.max_points:
-            Q = Q[np.linspace(0, len(Q) - 1, self.closer.max_points).astype(np.int64)]
+        scans = [(pose_of(g), Pg) for g, Pg in self._recent if frame - g <= self.closer.window]
+        Q = merge_submap(T, scans, self.closer.max_points)
         self._frames.append(frame)
         self._points.append(Q)
         self._sums.append(self._S.copy())
