@@ -103,7 +103,8 @@ class RevisitCheck:
         C = step_covariance
         if C is None or not np.all(np.isfinite(C)):
             C = self.closer.fallback_covariance
-        A = adjoint(pose_of(frame))
+        T = pose_of(frame)
+        A = adjoint(T)
         self._S = self._S + A @ C @ A.T
         if not merged or points is None or len(points) < 3:
             return None
@@ -111,7 +112,6 @@ class RevisitCheck:
         n, self._merged = self._merged, self._merged + 1
         if n % self.closer.every:
             return None
-        T = pose_of(frame)
         scans = [(pose_of(g), Pg) for g, Pg in self._recent if frame - g <= self.closer.window]
         Q = merge_submap(T, scans, self.closer.max_points)
         self._frames.append(frame)
@@ -119,11 +119,6 @@ class RevisitCheck:
         self._sums.append(self._S.copy())
         self._centroids = np.vstack([self._centroids, Q.mean(0)])
         return self._test(pose_of)
-
-    def _keyframe(self, i: int, pose_of: Callable[[int], np.ndarray]) -> Keyframe:
-        T = pose_of(self._frames[i])
-        Q = self._points[i]
-        return Keyframe(self._frames[i], T, Q, T[:3, :3] @ Q.mean(0) + T[:3, 3])
 
     def _test(self, pose_of: Callable[[int], np.ndarray]) -> LoopEdge | None:
         """The newest keyframe against the old keyframe it revisits, if any."""
@@ -139,16 +134,18 @@ class RevisitCheck:
             return None
         k = len(self._frames) - 1
         C_chain = chain_covariance(self._sums[j], self._sums[k], poses[k])
-        edge = c.measure(j, k, self._keyframe(j, pose_of), self._keyframe(k, pose_of), C_chain, {})
+        old, new = (
+            Keyframe(self._frames[i], poses[i], self._points[i], centroids[i]) for i in (j, k)
+        )
+        edge = c.measure(j, k, old, new, C_chain, {})
         self.checks.append(edge)
         self.check_frames.append((self._frames[j], self._frames[k]))
-        if edge.supported and math.isfinite(edge.chi2):
-            if self.failed(edge):
-                xi = log_se3(invert(invert(poses[j]) @ poses[k]) @ edge.Z)
-                gap = (float(np.linalg.norm(xi[:3])), math.degrees(float(np.linalg.norm(xi[3:]))))
-                self.alarm = (self._frames[j], self._frames[k], edge.chi2, *gap)
-            else:
-                self.alarm = None
+        if self.failed(edge):
+            xi = log_se3(invert(invert(poses[j]) @ poses[k]) @ edge.Z)
+            gap = (float(np.linalg.norm(xi[:3])), math.degrees(float(np.linalg.norm(xi[3:]))))
+            self.alarm = (self._frames[j], self._frames[k], edge.chi2, *gap)
+        elif edge.supported and math.isfinite(edge.chi2):  # an agreeing revisit clears it
+            self.alarm = None
         return edge
 
     def failed(self, edge: LoopEdge) -> bool:
