@@ -323,6 +323,59 @@ def holdout() -> dict[str, dict[str, Any]]:
     return _finish(s)
 
 
+JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
+"""The stress group's white attitude jitter levels (degrees per axis per frame)."""
+
+
+def _jittered(sc: dict[str, Any], jitter: float, kind: str = "white") -> dict[str, Any]:
+    """``sc`` with 5 cm range noise and sensor attitude jitter ``jitter`` degrees per axis."""
+    sensor = {**sc["sensors"][0], "overrides": {**sc["sensors"][0]["overrides"]}}
+    sensor["overrides"]["range_sigma"] = 0.05
+    return {**sc, "sensors": [sensor], "pointing": {"jitter_deg": jitter, "jitter_kind": kind}}
+
+
+def stress() -> dict[str, dict[str, Any]]:
+    """Motion the constant-velocity prior does not predict and scans with few points (issue
+    "the navigator when motion is not smooth"): sensor attitude jitter 0.25–2° per axis per
+    frame (white, and a random walk) with 5 cm range noise on a box-and-panel satellite's
+    orbit (procedural Envisat); a ~30-point-per-scan orbit of a 10 m satellite at 40–60 m; a start at 40 m with
+    ≤ 15 points per scan closing to 15 m. Made after the suite's parameters were frozen."""
+    s: dict[str, dict[str, Any]] = {}
+    base = {
+        "target": {"name": "envisat", "scale_to": 16.0},
+        "sensors": [_flash(128)],
+        "seed": 51,
+        **_ellipse(50.0, 38.0, 1.0, 20.0, 120),
+    }
+    for j in (0.0, *JITTER_DEG):
+        s[f"envisat-jitter{j:g}"] = _jittered(base, j)
+    s["envisat-walk0.5"] = _jittered(base, 0.5, "random-walk")
+    s["voyager-sparse30"] = {
+        "target": _mesh("voyager", "voyager", 10.0),
+        "sensors": [_flash(80)],
+        "seed": 52,
+        **_ellipse(60.0, 40.0, 1.0, 10.0, 100),
+    }
+    s["aura-farstart"] = {
+        "target": _mesh("aura", "envisat", 10.0),
+        "sensors": [_flash(24)],
+        "seed": 53,
+        "frames": 120,
+        "dt": 20.0,
+        "trajectory": {
+            "kind": "helical-approach",
+            "params": {
+                "radius_start": 40.0,
+                "radius_end": 15.0,
+                "height_start": 8.0,
+                "height_end": 2.0,
+                "turns": 0.5,
+            },
+        },
+    }
+    return _finish(s)
+
+
 PAPER_PRESETS = ("sim-eoi", "sim-helical", "sim-voyager", "sim-orion", "sim-bennu")
 
 
@@ -356,7 +409,7 @@ def write_configs(folder: Path) -> list[Path]:
 
     folder.mkdir(parents=True, exist_ok=True)
     written = []
-    for group, scenarios in (("suite", suite()), ("holdout", holdout())):
+    for group, scenarios in (("suite", suite()), ("holdout", holdout()), ("stress", stress())):
         for name, sc in scenarios.items():
             sc = json.loads(json.dumps(sc))  # tuples -> lists
             path = sc.get("target", {}).get("path")
@@ -374,10 +427,11 @@ def write_configs(folder: Path) -> list[Path]:
     return written
 
 
-def sequence_names(held_out: bool = False, only: str = "") -> list[str]:
-    """The suite's sequences with the paper presets, or the held-out ones; ``only``: keep the
-    names containing one of its comma-separated substrings."""
-    pool = holdout() if held_out else {**suite(), **paper()}
+def sequence_names(held_out: bool = False, only: str = "", stressed: bool = False) -> list[str]:
+    """The suite's sequences with the paper presets, or the held-out ones, or the stress group
+    (:func:`stress`); ``only``: keep the names containing one of its comma-separated
+    substrings."""
+    pool = stress() if stressed else holdout() if held_out else {**suite(), **paper()}
     return [n for n in pool if not only or any(s in n for s in only.split(","))]
 
 
@@ -391,6 +445,11 @@ def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
         "--holdout", action="store_true", help="the held-out sequences instead of the suite"
     )
     p.add_argument(
+        "--stress",
+        action="store_true",
+        help="the stress group (attitude jitter, sparse scans, far start-up) instead",
+    )
+    p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
 
@@ -400,7 +459,7 @@ def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
     from relnav.sim.scenario import simulate
 
     folders = {}
-    every = {**suite(), **holdout(), **paper()}
+    every = {**suite(), **holdout(), **stress(), **paper()}
     for name in names:
         d = out / "sequences" / name
         if not (d / "scenario.yaml").exists():
@@ -539,7 +598,7 @@ def main(argv: list[str] | None = None) -> int:
         for path in write_configs(a.write_configs):
             print(path)
         return 0
-    names = sequence_names(a.holdout, a.only)
+    names = sequence_names(a.holdout, a.only, a.stress)
     folders = simulate_suite(a.out, names)
     methods = [m for m in a.methods.split(",") if m]
     relnav_options = dict(o.split("=", 1) for o in a.options)

@@ -130,6 +130,8 @@ def write_run_outputs(
 
     paths = run.write(out)
     outputs = [paths["estimate"].name, paths["diagnostics"].name]
+    if "estimate_causal" in paths:  # a smoother's run: the online poses beside the smoothed
+        outputs.append(paths["estimate_causal"].name)
     if fmt == PoseFormat.kitti:
         import numpy as np
 
@@ -151,6 +153,11 @@ def write_run_outputs(
             preset=preset,
         )
         outputs.append("metrics.json")
+        if run.causal_poses is not None:  # the online poses, as a real-time loop had them
+            causal = evaluate_trajectories(
+                run.timestamps, run.causal_poses, seq.timestamps[:n], gt[:n]
+            )
+            metrics["causal"] = {k: v for k, v in causal.items() if isinstance(v, int | float)}
         if run.method == "relnav":  # the navigator's revisit test: revisits tested, failed
             revisits = run.options.get("finalize", {}).get("revisits") or []
             metrics.update(

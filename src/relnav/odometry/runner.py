@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import logging
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,7 +48,7 @@ class OdometryRun:
         Estimated ``T_world_sensor`` (world = the ground truth's frame when the run started
         from the ground truth's first pose, i.e. the target frame for simulated sequences).
         Methods with a smoother (``relnav``) give their smoothed trajectory here; the online
-        per-frame poses stay in ``steps[k].pose``.
+        per-frame poses are :attr:`causal_poses`.
     steps : list[OdometryStep]
         Per-frame details (empty when the run streamed to disk with ``keep_steps=False``).
     options : dict
@@ -60,7 +61,11 @@ class OdometryRun:
     frame_time_s : (N,) float64
         Wall-clock seconds per frame.
     paths : dict[str, Path]
-        Files already written by a streamed run (``estimate``, ``diagnostics``).
+        Files already written by a streamed run (``estimate``, ``diagnostics``; with a
+        smoother also ``estimate_causal``).
+    causal_poses : (N, 4, 4) float64, optional
+        The pose the tracker returned at each frame's time, from that frame and the ones before
+        only (what a real-time loop has); ``None`` when it equals :attr:`poses` (no smoother).
     """
 
     method: str
@@ -72,6 +77,13 @@ class OdometryRun:
     flagged: np.ndarray | None = field(repr=False, default=None)
     frame_time_s: np.ndarray | None = field(repr=False, default=None)
     paths: dict[str, Path] = field(default_factory=dict)
+    causal_poses: np.ndarray | None = field(repr=False, default=None)
+
+    @property
+    def online_poses(self) -> np.ndarray:
+        """The causal trajectory ``(N, 4, 4)``: :attr:`causal_poses`, or :attr:`poses` when
+        the tracker has no smoother."""
+        return self.poses if self.causal_poses is None else self.causal_poses
 
     @property
     def n_flagged(self) -> int:
@@ -129,7 +141,13 @@ class OdometryRun:
         with _RunWriter(out) as w:
             for t, T, row in zip(self.timestamps, self.poses, rows, strict=True):
                 w.add(float(t), T, row)
-        return w.paths
+        paths = dict(w.paths)
+        if self.causal_poses is not None:
+            from relnav.io.trajectories import write_tum
+
+            paths["estimate_causal"] = out / "estimate_causal.tum"
+            write_tum(paths["estimate_causal"], self.timestamps, self.causal_poses)
+        return paths
 
 
 def diagnostic_row(i: int, t: float, s: OdometryStep) -> dict[str, Any]:
@@ -371,18 +389,20 @@ def run_sequence(
             writer.abort()
         raise
     finalize = getattr(odo, "finalize", None)
-    smoothed = False
+    causal: np.ndarray | None = None
     if callable(finalize) and n:  # e.g. the navigator's fixed-lag smoother
         final = np.asarray(finalize(), dtype=float)
         if final.shape == poses.shape and np.all(np.isfinite(final)):
-            poses, smoothed = final, True
+            poses, causal = final, poses
     paths: dict[str, Path] = {}
     if writer is not None:
         writer.close()
         paths = dict(writer.paths)
-        if smoothed:  # the streamed rows were the online poses: the file gets the final ones
+        if causal is not None:  # the streamed rows were the online poses: kept beside
             from relnav.io.trajectories import write_tum
 
+            os.replace(paths["estimate"], writer.out / "estimate_causal.tum")
+            paths["estimate_causal"] = writer.out / "estimate_causal.tum"
             write_tum(paths["estimate"], times, poses)
     name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
     meta: dict[str, Any] = {
@@ -404,6 +424,7 @@ def run_sequence(
         flagged=flagged,
         frame_time_s=frame_time,
         paths=paths,
+        causal_poses=causal,
     )
     if run.n_flagged:
         log.info(

@@ -176,9 +176,17 @@ class TrajectorySpec(StrictModel):
 
 
 class PointingSpec(StrictModel):
-    """Rig pointing: boresight at ``target`` (W, m), ``up`` hint, white jitter ``jitter_deg``."""
+    """Rig pointing: boresight at ``target`` (W, m), ``up`` hint, attitude jitter.
 
-    jitter_deg: float = Field(default=0.0, ge=0)
+    ``jitter_deg``: σ of the sensor's attitude jitter (degrees), one value for the three axes or
+    one per sensor axis (x boresight, y, z). ``jitter_kind``: ``white`` (independent between
+    frames: a limit-cycling attitude control, thruster firings) or ``random-walk`` (the
+    per-frame increments are white with that σ: a drifting attitude). The jitter is part of
+    the ground truth (:func:`relnav.sim.trajectories.pointing_poses`).
+    """
+
+    jitter_deg: float | Vec3 = 0.0
+    jitter_kind: Literal["white", "random-walk"] = "white"
     up: Vec3 = (0.0, 0.0, 1.0)
     target: Vec3 = (0.0, 0.0, 0.0)
 
@@ -602,6 +610,7 @@ def _poses(sc: Scenario, jitter_ss: np.random.SeedSequence, n_keep: int | None =
         target=sc.pointing.target,
         up=sc.pointing.up,
         jitter_deg=sc.pointing.jitter_deg,
+        jitter_kind=sc.pointing.jitter_kind,
         seed=np.random.default_rng(jitter_ss),
     )
     R = sc.attitude.rotations(times)

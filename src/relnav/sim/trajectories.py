@@ -590,23 +590,32 @@ def pointing_poses(
     *,
     target: ArrayLike3 | float = (0.0, 0.0, 0.0),
     up: ArrayLike3 = (0.0, 0.0, 1.0),
-    jitter_deg: float = 0.0,
+    jitter_deg: float | ArrayLike3 = 0.0,
+    jitter_kind: str = "white",
     seed: int | np.random.Generator | None = None,
 ) -> np.ndarray:
     """Sensor poses ``T_W_sensor`` ``(N, 4, 4)``: :func:`look_at` plus seeded attitude jitter.
 
-    Jitter models Paper 1's "minor tumbling" of the hand-moved real sensor: each frame's
-    attitude is perturbed in the sensor frame, ``R = R_look · exp([δ]×)`` with
-    ``δ ~ N(0, σ² I₃)``, ``σ = jitter_deg`` (per axis, independent between frames)
-    **[interpretation: white jitter; the papers give no tumbling model]**.
+    Jitter models Paper 1's "minor tumbling" of the hand-moved real sensor and a chaser's
+    attitude control: each frame's attitude is perturbed in the sensor frame,
+    ``R = R_look · exp([δ_k]×)``. ``jitter_kind="white"``: ``δ_k ~ N(0, diag(σ²))``
+    independent between frames **[interpretation: the papers give no tumbling model]**;
+    ``"random-walk"``: ``δ_k = δ_{k-1} + w_k``, ``w_k ~ N(0, diag(σ²))`` (``δ_0 = w_0``).
+    ``σ = jitter_deg`` (degrees; one value or one per sensor axis x, y, z).
     """
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     R = look_at(p, target, up)
-    if jitter_deg < 0:
-        raise InputError(f"jitter_deg must be >= 0, got {jitter_deg}")
-    if jitter_deg > 0:
+    sigma = np.asarray(jitter_deg, dtype=np.float64).ravel()
+    if sigma.size not in (1, 3) or not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
+        raise InputError(f"jitter_deg must be one or three values >= 0, got {jitter_deg!r}")
+    sigma = np.broadcast_to(sigma, (3,))
+    if jitter_kind not in ("white", "random-walk"):
+        raise InputError(f"jitter_kind must be 'white' or 'random-walk', got {jitter_kind!r}")
+    if np.any(sigma > 0):
         rng = np.random.default_rng(seed)
-        delta = rng.normal(0.0, np.deg2rad(jitter_deg), size=(len(p), 3))
+        delta = rng.normal(0.0, 1.0, size=(len(p), 3)) * np.deg2rad(sigma)
+        if jitter_kind == "random-walk":
+            delta = np.cumsum(delta, axis=0)
         R = R @ rotvec_to_matrix(delta)
     T = np.zeros((len(p), 4, 4))
     T[:, :3, :3] = R
