@@ -2,9 +2,11 @@
 
 For clouds of ≈150, 440, 880 and 3 100 points (the presets sim-bennu, sim-helical, real-fb and
 sim-eoi), times ``feature:hods+gcc+alphabeta`` on consecutive frame pairs the way odometry runs it
-(the previous scan's descriptors are reused, so one step = describe the new scan + match + group
-+ estimate) on the window of consecutive frames whose mean size is closest to the paper's, with
-one BLAS thread, for the HoD-S readings/modes:
+(with ``radius_from="own"`` the previous scan's descriptors are reused, so one step = describe
+the new scan + match + group + estimate; with paper 1's rule ``radius_from="source"``, the
+default, the previous scan is described again at the new scan's radius) on the window of
+consecutive frames whose mean size is closest to the paper's, with one BLAS thread, for the
+HoD-S readings/modes:
 
 * ``keypoint`` — keypoint-centred pairs (relnav's default reading),
 * ``all/exact`` — all point pairs, exact incremental histograms,
@@ -55,8 +57,17 @@ def window(seq: ScanSequence, target_points: int, n_pairs: int) -> int:
     return int(np.argmin(np.abs(means - target_points)))
 
 
-def step_stats(seq: ScanSequence, start: int, estimator: str, options: dict, n_pairs: int):
-    reg = FeatureRegistration("hods", "gcc", estimator, descriptor_options=options)
+def step_stats(
+    seq: ScanSequence,
+    start: int,
+    estimator: str,
+    options: dict,
+    n_pairs: int,
+    radius_from: str = "source",
+):
+    reg = FeatureRegistration(
+        "hods", "gcc", estimator, descriptor_options=options, radius_from=radius_from
+    )
     gt = seq.gt_poses
     prev = reg.prepare(seq[start].points)
     reg.register_prepared(reg.prepare(seq[start + 1].points), prev)  # warm-up (numba)
@@ -88,25 +99,38 @@ def step_stats(seq: ScanSequence, start: int, estimator: str, options: dict, n_p
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=15)
+    ap.add_argument(
+        "--radius-from",
+        nargs="+",
+        default=["source", "own"],
+        choices=["source", "own"],
+        help="radius rules to time (source: paper 1's, the default; own: relnav's reuse)",
+    )
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument("--presets", nargs="+", default=[s[0] for s in SIZES])
     args = ap.parse_args()
     print(
-        f"{'preset':12} {'pts':>6} {'variant':10} {'ms/step':>9} {'paper ms':>9} "
+        f"{'preset':12} {'pts':>6} {'variant':10} {'radius':7} {'ms/step':>9} {'paper ms':>9} "
         f"{'× faster':>9} {'rot° (svd)':>10} {'t m (svd)':>10}"
     )
     with tempfile.TemporaryDirectory() as tmp, limit_blas_threads(1):
         for preset, target_points, paper_ms in SIZES:
+            if preset not in args.presets:
+                continue
             d = Path(tmp) / preset
             simulate(get_preset(preset), d)
             seq = ScanSequence(d)
             k0 = window(seq, target_points, args.pairs)
-            for name, opts in VARIANTS.items():
-                ms, _, _, n, _, _ = step_stats(seq, k0, "alphabeta", opts, args.pairs)
-                _, rot, tr, _, flagged, step = step_stats(seq, k0, "svd", opts, args.pairs)
-                print(
-                    f"{preset:12} {n:6.0f} {name:10} {ms:9.1f} {paper_ms:9.0f} "
-                    f"{paper_ms / ms:9.1f} {rot:10.2f} {tr:10.3f} {flagged:8d} {step:6.2f}",
-                    flush=True,
-                )
+            for name in args.variants:
+                opts = VARIANTS[name]
+                for rf in args.radius_from:
+                    ms, _, _, n, _, _ = step_stats(seq, k0, "alphabeta", opts, args.pairs, rf)
+                    _, rot, tr, _, flagged, step = step_stats(seq, k0, "svd", opts, args.pairs, rf)
+                    print(
+                        f"{preset:12} {n:6.0f} {name:10} {rf:7} {ms:9.1f} {paper_ms:9.0f} "
+                        f"{paper_ms / ms:9.1f} {rot:10.2f} {tr:10.3f} {flagged:8d} {step:6.2f}",
+                        flush=True,
+                    )
 
 
 if __name__ == "__main__":

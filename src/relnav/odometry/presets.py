@@ -17,7 +17,16 @@ from typing import Any
 from relnav.errors import ConfigError
 from relnav.odometry.runner import NAVIGATOR_METHOD
 
-__all__ = ["METHOD_PRESETS", "MethodPreset", "method_label", "resolve_method"]
+__all__ = [
+    "METHOD_PRESETS",
+    "PAPER1_COMPETITORS",
+    "MethodPreset",
+    "method_label",
+    "resolve_method",
+]
+
+PAPER1_COMPETITORS = ("icp-point", "icp-plane", "icp-x84", "s4pcs", "sicp-point", "sicp-plane")
+"""Paper 1's competitor schemes; ``paper1-<name>`` is each as the paper ran it."""
 
 
 @dataclass(frozen=True)
@@ -37,7 +46,14 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
     "paper1": MethodPreset(
         "feature:hods+gcc+alphabeta",
         {},
-        "paper 1's pipeline as published: HoD-S descriptors, GCC grouping, adaptive αβ filter",
+        "paper 1's pipeline as published: HoD-S descriptors, GCC grouping, adaptive αβ filter, "
+        "one support radius from the new scan's resolution for both scans",
+    ),
+    "paper1-own-radius": MethodPreset(
+        "feature:hods+gcc+alphabeta",
+        {"radius_from": "own"},
+        "paper 1's pipeline with relnav's radius per scan (reuses the previous scan's "
+        "descriptors; not the paper's rule, docs/paper1-deviations.md)",
     ),
     "paper1-svd": MethodPreset(
         "feature:hods+gcc+svd",
@@ -50,9 +66,11 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
             "grouper_options": {"seeds": "all"},
             "refine": "icp-plane",
             "gate_rotation_deg": 15.0,
+            "radius_from": "own",
         },
         "HoD-S with relnav's extensions: GCC seeded from every correspondence, SVD, "
-        "point-to-plane ICP refinement, 15° innovation gate (the demo's 'extended')",
+        "point-to-plane ICP refinement, 15° innovation gate, each scan's own support radius "
+        "(the demo's 'extended')",
     ),
     "relnav-tumbling": MethodPreset(
         NAVIGATOR_METHOD,
@@ -60,6 +78,16 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
         "relnav's navigator for a turning target seen by a sparse flash: curved map patches and "
         "the start-up re-anchored on the map of frames 5-20 (docs/navigator.md)",
     ),
+    **{
+        f"paper1-{m}": MethodPreset(
+            f"{m}:paper",
+            {"motion_prior": "identity"},
+            f"paper 1's competitor {m} as the paper ran it: absolute thresholds (m, rad), "
+            "started from the identity (the bare method string is relnav's tuned setting: "
+            "scale-aware thresholds, constant-velocity start)",
+        )
+        for m in PAPER1_COMPETITORS
+    },
 }
 """Preset name → :class:`MethodPreset`."""
 

@@ -17,11 +17,15 @@ Pipeline for a pair (source = scan ``k+1``, target = scan ``k``), ALGORITHMS §0
    method string) refines the estimate on the full clouds, starting from it; a refinement
    that is not ``ok`` leaves the feature estimate in place.
 
-**[interpretation] radius per cloud.** Paper 1 computes ``Tr`` on ``P_{k+1}`` and uses it for both
-clouds. By default (``radius_from="own"``) each cloud uses its own ``Tr``, which lets odometry
-reuse the previous scan's descriptors (half the work); consecutive scans have nearly equal
-resolutions. ``radius_from="source"`` recomputes the target descriptors with the source's radius,
-exactly as the paper.
+**Radius: paper 1's rule by default.** Paper 1 computes ``Tr`` on ``P_{k+1}`` (the source) and
+uses that one support radius for *both* clouds. That is the default (``radius_from="source"``):
+the target is described again at the source's radius (its resolution, keypoints and normals are
+reused), so the previous scan's descriptors cannot be reused as they are and a step describes
+two clouds. ``radius_from="own"`` (relnav's option, used by the ``extended`` preset) gives each
+cloud its own ``Tr`` and reuses the previous scan's descriptors; it is cheaper but the radius
+then changes between consecutive scans (``Tr`` moves by 1-2.5 % per frame, up to ~10 %), and
+HoD/HoD-S, which divide distances by the radius, describe the same point differently
+(docs/paper1-deviations.md).
 """
 
 from __future__ import annotations
@@ -65,6 +69,8 @@ class CloudFeatures:
         Descriptors (NaN rows invalid).
     timings : dict[str, float]
         Seconds spent per stage while preparing this cloud.
+    normals : (N, 3) float64 or None
+        Normals of ``points`` (only for descriptors that need them).
     """
 
     points: np.ndarray
@@ -73,6 +79,7 @@ class CloudFeatures:
     keypoints: np.ndarray
     descriptors: np.ndarray
     timings: dict[str, float] = field(default_factory=dict)
+    normals: np.ndarray | None = None
 
 
 class FeatureRegistration:
@@ -99,8 +106,10 @@ class FeatureRegistration:
         Descriptor-distance gate of the NN matching (paper 1: 1.0).
     mutual : bool
         Keep only mutual nearest neighbours.
-    radius_from : {"own", "source"}
-        See the module docstring.
+    radius_from : {"source", "own"}
+        ``source`` (default, paper 1): both clouds are described with the radius from the
+        source's resolution; ``own``: each cloud with its own (relnav's option, reuses the
+        previous scan's descriptors). See the module docstring.
     min_points : int
         Clouds with fewer finite points are ``degenerate``.
     descriptor_options, grouper_options, estimator_options : dict, optional
@@ -122,7 +131,7 @@ class FeatureRegistration:
         keypoint_options: dict[str, Any] | None = None,
         tau: float = 1.0,
         mutual: bool = False,
-        radius_from: Literal["own", "source"] = "own",
+        radius_from: Literal["own", "source"] = "source",
         min_points: int = 5,
         descriptor_options: dict[str, Any] | None = None,
         grouper_options: dict[str, Any] | None = None,
@@ -238,7 +247,32 @@ class FeatureRegistration:
             **self.descriptor_options,
         )
         timings["describe"] = time.perf_counter() - t0
-        return CloudFeatures(P, tr, r, kp, desc, timings)
+        return CloudFeatures(P, tr, r, kp, desc, timings, normals)
+
+    def describe_at(self, cloud: CloudFeatures, radius: float) -> CloudFeatures:
+        """``cloud`` described again with support ``radius`` (m), reusing its resolution,
+        keypoints and normals (paper 1's one radius for both clouds of a pair)."""
+        if cloud.keypoints.size == 0 or cloud.points.shape[0] < self.min_points:
+            return cloud
+        t0 = time.perf_counter()
+        desc = compute_descriptors(
+            self.descriptor_spec.name,
+            cloud.points,
+            radius=float(radius),
+            keypoints=cloud.keypoints,
+            normals=cloud.normals,
+            **self.descriptor_options,
+        )
+        timings = {"describe_target": time.perf_counter() - t0}
+        return CloudFeatures(
+            cloud.points,
+            cloud.resolution,
+            float(radius),
+            cloud.keypoints,
+            desc,
+            timings,
+            cloud.normals,
+        )
 
     # ------------------------------------------------------------------ pair work
     def register(
@@ -255,14 +289,14 @@ class FeatureRegistration:
         """Register two prepared clouds; the source's timings are counted in the result."""
         from relnav.matching.nn import match_descriptors
 
+        timings = dict(source.timings)
         if (
             self.radius_from == "source"
             and np.isfinite(source.radius)
             and target.radius != source.radius
-            and target.points.shape[0] >= self.min_points
         ):
-            target = self.prepare(target.points, radius=source.radius, keypoints=target.keypoints)
-        timings = dict(source.timings)
+            target = self.describe_at(target, source.radius)
+            timings.update(target.timings)
         n_src, n_tgt = source.points.shape[0], target.points.shape[0]
         info: dict[str, Any] = {"n_source": n_src, "n_target": n_tgt}
         if n_src == 0 or n_tgt == 0:
