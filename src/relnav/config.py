@@ -33,11 +33,13 @@ class StrictModel(BaseModel):
 
 def load_yaml(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping; :class:`ConfigError` naming the file on any problem."""
+    from relnav.io.text import read_text_file  # here: relnav.io imports this module
+
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: no such file")
     try:
-        data = yaml.safe_load(p.read_text())
+        data = yaml.safe_load(read_text_file(p, what="YAML", error=ConfigError))
     except yaml.YAMLError as e:
         raise ConfigError(f"{p}: invalid YAML: {e}") from None
     if data is None:

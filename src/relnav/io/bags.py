@@ -13,6 +13,8 @@ latency); messages are ordered by that stamp. Points with a non-finite coordinat
 
 from __future__ import annotations
 
+import hashlib
+import itertools
 import logging
 from collections.abc import Iterator
 from pathlib import Path
@@ -44,8 +46,104 @@ def is_recording(path: str | Path) -> bool:
     return p.is_dir() and (p / "metadata.yaml").is_file()
 
 
+_PF_SIZES = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 8: 8}
+
+MAX_POINT_STEP = 1 << 16
+"""Largest ``point_step`` accepted, bytes (real sensors use 16-64; PCL's biggest types ~1.4 kB)."""
+
+
+def _int(msg: Any, name: str, where: str) -> int:
+    try:
+        v = int(getattr(msg, name))
+    except (AttributeError, TypeError, ValueError, OverflowError):
+        raise InputError(f"{where}: PointCloud2 has no integer {name}") from None
+    if v < 0:
+        raise InputError(f"{where}: PointCloud2 {name} = {v} is negative")
+    return v
+
+
+def pointcloud2_layout(msg: Any, *, where: str = "PointCloud2") -> dict[str, Any]:
+    """Check a ``PointCloud2`` message's layout against its data, before touching the data.
+
+    Checks: ``x``, ``y``, ``z`` fields present with a known datatype, a non-negative offset, a
+    count that is a small positive integer (``0`` read as ``1``) and an extent within
+    ``point_step`` (and not overlapping each other); ``row_step ≥ width·point_step`` (``0`` is
+    read as ``width·point_step``); ``data`` long enough for ``height`` rows.
+
+    Returns
+    -------
+    dict
+        ``height``, ``width``, ``point_step``, ``row_step`` (int) and ``dtype`` (the x/y/z
+        record of one point).
+
+    Raises
+    ------
+    InputError
+        Naming ``where`` and the first inconsistency.
+    """
+    try:
+        fields = {str(f.name): f for f in msg.fields}
+    except (AttributeError, TypeError):
+        raise InputError(f"{where}: PointCloud2 has no field list") from None
+    missing = [n for n in "xyz" if n not in fields]
+    if missing:
+        raise InputError(
+            f"{where}: PointCloud2 has no field(s) {', '.join(missing)} "
+            f"(fields: {', '.join(fields) or 'none'})"
+        )
+    height, width = _int(msg, "height", where), _int(msg, "width", where)
+    step, row_step = _int(msg, "point_step", where), _int(msg, "row_step", where)
+    if step > MAX_POINT_STEP:
+        raise InputError(f"{where}: PointCloud2 point_step {step} > {MAX_POINT_STEP} bytes")
+    endian = ">" if getattr(msg, "is_bigendian", False) else "<"
+    names, formats, offsets, spans = [], [], [], []
+    for n in "xyz":
+        f = fields[n]
+        dtype_id, offset, count = (getattr(f, k, None) for k in ("datatype", "offset", "count"))
+        if dtype_id not in _PF_TYPES:
+            raise InputError(f"{where}: field {n!r} has unknown PointField datatype {dtype_id}")
+        try:
+            offset, count = int(offset), int(count if count is not None else 1)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{where}: field {n!r} has a non-integer offset or count") from None
+        count = max(count, 1)
+        end = offset + _PF_SIZES[dtype_id] * count
+        if offset < 0 or count > MAX_POINT_STEP or end > step:
+            raise InputError(
+                f"{where}: field {n!r} (offset {offset}, count {count}, "
+                f"{_PF_SIZES[dtype_id]}-byte values) does not fit point_step {step}"
+            )
+        names.append(n)
+        formats.append(endian + _PF_TYPES[dtype_id])
+        offsets.append(offset)
+        spans.append((offset, offset + _PF_SIZES[dtype_id]))
+    spans.sort()
+    if any(a[1] > b[0] for a, b in itertools.pairwise(spans)):
+        raise InputError(f"{where}: PointCloud2 fields x, y, z overlap (offsets {offsets})")
+    row = row_step or width * step
+    if row < width * step:
+        raise InputError(
+            f"{where}: PointCloud2 row_step {row} < width {width} × point_step {step}: rows overlap"
+        )
+    try:
+        size = len(msg.data)
+    except TypeError:
+        raise InputError(f"{where}: PointCloud2 has no data buffer") from None
+    need = (height - 1) * row + width * step if height and width else 0
+    if size < need:
+        raise InputError(
+            f"{where}: PointCloud2 data has {size} bytes, too few for "
+            f"{height}×{width} points of {step} bytes (row_step {row}: {need} bytes)"
+        )
+    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
+    return {"height": height, "width": width, "point_step": step, "row_step": row, "dtype": dt}
+
+
 def decode_pointcloud2(msg: Any, *, where: str = "PointCloud2") -> np.ndarray:
     """Decode the ``x, y, z`` fields of a ``sensor_msgs/PointCloud2`` message.
+
+    The layout is checked first (:func:`pointcloud2_layout`); the data are then read in place
+    (memory: the ``(N, 3)`` result).
 
     Parameters
     ----------
@@ -64,45 +162,86 @@ def decode_pointcloud2(msg: Any, *, where: str = "PointCloud2") -> np.ndarray:
     Raises
     ------
     InputError
-        A missing ``x``/``y``/``z`` field, an unknown datatype or a data buffer too short.
+        An inconsistent layout (see :func:`pointcloud2_layout`), or coordinates beyond
+        :data:`relnav.io.pointclouds.ABSURD_COORDINATE` (bytes misread).
     """
-    fields = {f.name: f for f in msg.fields}
-    missing = [n for n in "xyz" if n not in fields]
-    if missing:
-        raise InputError(
-            f"{where}: PointCloud2 has no field(s) {', '.join(missing)} "
-            f"(fields: {', '.join(fields) or 'none'})"
-        )
-    endian = ">" if msg.is_bigendian else "<"
-    names, formats, offsets = [], [], []
-    for n in "xyz":
-        f = fields[n]
-        if f.datatype not in _PF_TYPES:
-            raise InputError(f"{where}: field {n!r} has unknown PointField datatype {f.datatype}")
-        names.append(n)
-        formats.append(endian + _PF_TYPES[f.datatype])
-        offsets.append(int(f.offset))
-    step = int(msg.point_step)
-    height, width = int(msg.height), int(msg.width)
-    n_pts = height * width
-    if n_pts == 0:
+    from relnav.io.pointclouds._common import _check_coordinates
+
+    lay = pointcloud2_layout(msg, where=where)
+    height, width = lay["height"], lay["width"]
+    if height * width == 0:
         return np.zeros((0, 3))
-    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
-    data = np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(), dtype=np.uint8)
-    row = int(msg.row_step) or width * step
-    if data.size < (height - 1) * row + width * step or max(offsets) + 1 > step:
-        raise InputError(
-            f"{where}: PointCloud2 data has {data.size} bytes, too few for "
-            f"{height}×{width} points of {step} bytes (row_step {row})"
-        )
-    rows = [
-        np.frombuffer(data[r * row : r * row + width * step].tobytes(), dtype=dt)
-        for r in range(height)
-    ]
-    rec = np.concatenate(rows) if len(rows) > 1 else rows[0]
-    pts = np.column_stack([rec["x"], rec["y"], rec["z"]]).astype(np.float64)
-    ok = np.isfinite(pts).all(axis=1)
+    raw = msg.data
+    if isinstance(raw, bytes | bytearray | memoryview):
+        data = np.frombuffer(raw, dtype=np.uint8)
+    else:  # rosbags gives a uint8 array; a list of ints works too
+        data = np.ascontiguousarray(raw, dtype=np.uint8).reshape(-1)
+    rec = np.ndarray(
+        (height, width),
+        dtype=lay["dtype"],
+        buffer=data,
+        strides=(lay["row_step"], lay["point_step"]),
+    )
+    pts = np.empty((height * width, 3))
+    with np.errstate(all="ignore"):  # misread bytes: NaN/inf dropped, absurd values refused
+        for j, c in enumerate("xyz"):
+            pts[:, j] = rec[c].reshape(-1)
+    ok = _check_coordinates(Path(where), pts)
     return pts[ok] if not ok.all() else pts
+
+
+def _deserialize(reader: Any, raw: Any, con: Any, *, where: str) -> Any:
+    """A message of the recording; InputError when its bytes do not deserialise."""
+    try:
+        return reader.deserialize(raw, con.msgtype)
+    except Exception as e:  # rosbags raises its own types, struct.error, ValueError...
+        raise InputError(f"{where}: cannot deserialise ({type(e).__name__}: {e})") from None
+
+
+def _frame_id(msg: Any) -> str:
+    return str(getattr(getattr(msg, "header", None), "frame_id", ""))
+
+
+def _checked_stamps(
+    path: Path, topic: str, stamps: list[tuple[float, int]], digests: list[bytes]
+) -> list[tuple[float, int]]:
+    """Sorted ``(stamp, message index)``: an exact duplicate message (same stamp, same bytes) is
+    dropped with a warning; two different messages with one stamp, or a non-finite stamp, are
+    an InputError (as equal times in a sequence folder)."""
+    out: list[tuple[float, int]] = []
+    dropped = 0
+    for t, k in sorted(stamps):
+        if not np.isfinite(t):
+            raise InputError(f"{path} {topic}: message {k} has a non-finite header stamp")
+        if out and t == out[-1][0]:
+            if digests[k] == digests[out[-1][1]]:
+                dropped += 1
+                continue
+            raise InputError(
+                f"{path} {topic}: messages {out[-1][1]} and {k} have the same header stamp "
+                f"{t!r} s but different content: scan times must increase"
+            )
+        out.append((t, k))
+    if dropped:
+        logger.warning(
+            "%s %s: dropped %d duplicated message(s) (same stamp and bytes)", path, topic, dropped
+        )
+    return out
+
+
+def _warn_frame_ids(path: Path, topic: str, frames: list[str | None]) -> None:
+    """Warn when the messages of one topic name several frames (odometry assumes one sensor)."""
+    named = [f for f in frames if f is not None]
+    distinct = sorted(set(named))
+    if len(distinct) > 1:
+        counts = ", ".join(f"{f or '(empty)'} ×{named.count(f)}" for f in distinct[:5])
+        logger.warning(
+            "%s %s: messages name %d different frame_ids (%s): odometry treats them as one sensor",
+            path,
+            topic,
+            len(distinct),
+            counts,
+        )
 
 
 def _stamp_seconds(msg: Any, fallback_ns: int) -> float:
@@ -162,16 +301,23 @@ class BagSequence:
                     )
                 self._topic = topic
                 cons = [c for c in r.connections if c.topic == topic]
-                stamps = []
+                stamps, frames, digests = [], [], []
                 for k, (con, t_ns, raw) in enumerate(r.messages(connections=cons)):
-                    stamps.append((_stamp_seconds(r.deserialize(raw, con.msgtype), t_ns), k))
+                    try:
+                        msg = _deserialize(r, raw, con, where=f"{self._path} {topic} #{k}")
+                    except InputError:  # kept: its frame is flagged when read
+                        msg = None
+                    stamps.append((_stamp_seconds(msg, t_ns), k))
+                    frames.append(_frame_id(msg) if msg is not None else None)
+                    digests.append(hashlib.blake2b(bytes(raw), digest_size=16).digest())
         except InputError:
             raise
         except Exception as e:  # rosbags raises its own error types per format
             raise InputError(
                 f"{self._path}: cannot read recording ({type(e).__name__}: {e})"
             ) from None
-        stamps.sort()
+        stamps = _checked_stamps(self._path, topic, stamps, digests)
+        _warn_frame_ids(self._path, topic, frames)
         self._times = np.array([s for s, _ in stamps], dtype=np.float64)
         self._order = [k for _, k in stamps]  # sorted position → message index in the bag
         self._pos_of = {k: i for i, k in enumerate(self._order)}
@@ -222,13 +368,22 @@ class BagSequence:
             self._ctx.__exit__(None, None, None)
         self._ctx, self._iter = None, None
 
-    def _stream(self) -> Iterator[tuple[int, Scan]]:
+    def _stream(self) -> Iterator[tuple[int, Scan | InputError]]:
+        """Every message of the topic as a scan, or the error that message raised: one bad
+        message never ends the stream."""
         r = self._ctx
         cons = [c for c in r.connections if c.topic == self._topic]
         for k, (con, t_ns, raw) in enumerate(r.messages(connections=cons)):
-            msg = r.deserialize(raw, con.msgtype)
-            pts = decode_pointcloud2(msg, where=f"{self._path} {self._topic} #{k}")
-            frame = str(getattr(getattr(msg, "header", None), "frame_id", ""))
+            if k not in self._pos_of:  # a dropped duplicate
+                continue
+            where = f"{self._path} {self._topic} #{k}"
+            try:
+                msg = _deserialize(r, raw, con, where=where)
+                pts = decode_pointcloud2(msg, where=where)
+            except InputError as e:
+                yield k, e
+                continue
+            frame = _frame_id(msg)
             yield k, Scan(pts, time=_stamp_seconds(msg, t_ns), sensor={"frame_id": frame})
 
     def __len__(self) -> int:
@@ -250,6 +405,8 @@ class BagSequence:
         for k, scan in self._iter:
             self._next_msg = k + 1
             if k == want:
+                if isinstance(scan, InputError):
+                    raise scan
                 self._last = (k, scan)
                 return scan
         raise InputError(

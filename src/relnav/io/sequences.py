@@ -37,6 +37,7 @@ from relnav.config import dump_yaml, load_yaml
 from relnav.errors import ConfigError, InputError
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, POINT_WRITE_EXTENSIONS, read_scan
 from relnav.io.pointclouds import write_points as _write_points
+from relnav.io.text import read_text_file
 from relnav.io.trajectories import read_tum, write_tum
 from relnav.scan import Scan
 
@@ -125,7 +126,7 @@ def _read_yaml(p: Path) -> dict[str, Any]:
 
 def _read_timestamps(p: Path) -> np.ndarray:
     vals: list[float] = []
-    for no, line in enumerate(p.read_text(encoding="utf-8-sig").splitlines(), start=1):
+    for no, line in enumerate(read_text_file(p, what="timestamps").splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
@@ -146,8 +147,8 @@ def _check_increasing(t: np.ndarray, source: Path) -> None:
         k = int(bad[0]) + 1
         kind = "duplicate" if t[k] == t[k - 1] else "decreasing"
         raise InputError(
-            f"{source}: scan times must increase: {kind} time {t[k]!r} s at scan {k} "
-            f"(previous {t[k - 1]!r} s; {bad.size} such scans)"
+            f"{source}: scan times must increase: {kind} time {float(t[k])!r} s at scan {k} "
+            f"(previous {float(t[k - 1])!r} s; {bad.size} such scans)"
         )
 
 

@@ -28,7 +28,8 @@ import numpy as np
 from relnav.errors import InputError
 from relnav.io.bags import BagSequence, is_recording
 from relnav.io.pointclouds import POINT_READ_EXTENSIONS, read_scan
-from relnav.io.sequences import _natural_key, _read_timestamps
+from relnav.io.sequences import _check_increasing, _natural_key, _read_timestamps
+from relnav.io.text import read_text_file
 from relnav.io.trajectories import read_kitti
 from relnav.scan import Scan
 
@@ -135,7 +136,7 @@ def _point_files(d: Path) -> list[Path]:
 
 def read_kitti_calib_tr(path: Path) -> np.ndarray | None:
     """The ``Tr`` line of a KITTI ``calib.txt`` (velodyne → camera 0) as a 4×4, or ``None``."""
-    for line in path.read_text(encoding="utf-8").splitlines():
+    for line in read_text_file(path, what="KITTI calibration").splitlines():
         key, _, rest = line.partition(":")
         if key.strip() == "Tr":
             try:
@@ -170,6 +171,7 @@ def _kitti_sequence(folder: Path) -> FileSequence:
         extra.append(folder / "times.txt")
         if len(times) != len(files):
             raise InputError(f"{folder / 'times.txt'}: {len(times)} times for {len(files)} scans")
+        _check_increasing(times, folder / "times.txt")
     name = folder.name
     candidates = [
         folder / "poses" / f"{name}.txt",
@@ -212,6 +214,7 @@ def _plain_folder(folder: Path) -> FileSequence:
             extra.append(folder / name)
             if len(times) != len(files):
                 raise InputError(f"{folder / name}: {len(times)} times for {len(files)} scans")
+            _check_increasing(times, folder / name)
             break
     return FileSequence(files, times=times, kind="folder", folder=folder, extra_sources=extra)
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from relnav.errors import InputError
 from relnav.geometry.rotations import matrix_to_quat, quat_to_matrix
+from relnav.io.text import read_text_file
 
 __all__ = ["read_kitti", "read_trajectory", "read_tum", "write_kitti", "write_tum"]
 
@@ -32,10 +33,7 @@ def _numeric_rows(p: Path, width: int, what: str) -> tuple[np.ndarray, list[int]
     """Parse every non-comment line of ``p`` into ``width`` finite floats."""
     if not p.is_file():
         raise InputError(f"{p}: no such file")
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError(f"{p}: not a text {what} file (undecodable bytes)") from None
+    text = read_text_file(p, what=what)
     rows: list[list[float]] = []
     linenos: list[int] = []
     for no, line in enumerate(text.splitlines(), start=1):
@@ -185,14 +183,10 @@ def write_kitti(path: str | Path, poses: np.ndarray) -> Path:
 def _first_row_width(p: Path) -> int:
     if not p.is_file():
         raise InputError(f"{p}: no such file")
-    try:
-        with p.open(encoding="utf-8-sig") as f:
-            for line in f:
-                s = line.strip()
-                if s and not s.startswith("#"):
-                    return len([t for t in _SPLIT.split(s) if t])
-    except UnicodeDecodeError:
-        raise InputError(f"{p}: not a text trajectory file (undecodable bytes)") from None
+    for line in read_text_file(p, what="trajectory").splitlines():
+        s = line.strip()
+        if s and not s.startswith("#"):
+            return len([t for t in _SPLIT.split(s) if t])
     return 0
 
 

@@ -1,0 +1,252 @@
+"""Issue 41 (reliability, second campaign): recordings, archives and text encodings.
+
+Each test names the case of the issue it covers.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from relnav.errors import ConfigError, InputError, RelnavError
+from relnav.io.bags import BagSequence, decode_pointcloud2
+from relnav.io.pointclouds import write_points
+from relnav.io.sources import open_sequence
+
+pytest.importorskip("rosbags")
+from rosbags.typesys import Stores, get_typestore
+
+TS = get_typestore(Stores.ROS1_NOETIC)
+
+
+def pc2(
+    points: np.ndarray,
+    stamp: float,
+    *,
+    frame: str = "lidar",
+    names: str = "xyz",
+    step: int | None = None,
+    row_step: int | None = None,
+    height: int = 1,
+    width: int | None = None,
+    offsets: tuple[int, ...] | None = None,
+    counts: tuple[int, ...] | None = None,
+    data: bytes | None = None,
+):  # type: ignore[no-untyped-def]
+    """A float32 PointCloud2 (ROS 1 types) whose layout fields can be overridden."""
+    PC2 = TS.types["sensor_msgs/msg/PointCloud2"]
+    PF = TS.types["sensor_msgs/msg/PointField"]
+    Header = TS.types["std_msgs/msg/Header"]
+    Time = TS.types["builtin_interfaces/msg/Time"]
+    pts = np.asarray(points, dtype="<f4").reshape(-1, len(names))
+    offsets = offsets or tuple(4 * i for i in range(len(names)))
+    counts = counts or (1,) * len(names)
+    fields = [
+        PF(name=n, offset=o, datatype=7, count=c)
+        for n, o, c in zip(names, offsets, counts, strict=True)
+    ]
+    step = 12 if step is None else step
+    width = len(pts) // height if width is None else width
+    raw = pts.tobytes() if data is None else data
+    sec = int(np.floor(stamp))
+    return PC2(
+        header=Header(
+            seq=0, stamp=Time(sec=sec, nanosec=round((stamp - sec) * 1e9)), frame_id=frame
+        ),
+        height=height,
+        width=width,
+        fields=fields,
+        is_bigendian=False,
+        point_step=step,
+        row_step=width * step if row_step is None else row_step,
+        data=np.frombuffer(raw, dtype=np.uint8).copy(),
+        is_dense=False,
+    )
+
+
+def write_bag(path: Path, msgs: list) -> Path:  # type: ignore[type-arg]
+    from rosbags.rosbag1 import Writer
+
+    with Writer(path) as w:
+        con = w.add_connection("/points", "sensor_msgs/msg/PointCloud2", typestore=TS)
+        for k, m in enumerate(msgs):
+            w.write(con, 10**9 * (k + 1), TS.serialize_ros1(m, m.__msgtype__))
+    return path
+
+
+def cloud(k: int, n: int = 50) -> np.ndarray:
+    return np.random.default_rng(k).uniform(-1, 1, (n, 3)) + np.array([5.0, 0.0, 0.0])
+
+
+# --- recordings ---------------------------------------------------------------------------
+
+
+def test_one_bad_message_does_not_kill_the_stream(tmp_path):  # case 1
+    msgs = [pc2(cloud(k), float(k)) for k in range(8)]
+    msgs[4] = pc2(cloud(4)[:, :2], 4.0, names="xy", step=8)  # no z field
+    seq = BagSequence(write_bag(tmp_path / "a.bag", msgs))
+    assert len(seq) == 8
+    for k in range(8):
+        if k == 4:
+            with pytest.raises(InputError, match="no field"):
+                seq[k]
+        else:  # every later message still decodes
+            np.testing.assert_allclose(seq[k].points, cloud(k).astype("f4"), rtol=0, atol=0)
+
+
+def test_overlapping_rows_are_refused_before_any_allocation(tmp_path):  # case 2
+    m = pc2(np.zeros((1, 3)), 0.0, step=12, width=8192, height=98305, row_step=1)
+    with pytest.raises(InputError, match="rows overlap"):
+        decode_pointcloud2(m)
+    # a bag of them: the frame is flagged by the reader, not a MemoryError
+    seq = BagSequence(
+        write_bag(
+            tmp_path / "b.bag",
+            [
+                pc2(cloud(0), 0.0),
+                pc2(np.zeros((1, 3)), 1.0, step=12, width=8192, height=98305, row_step=1),
+            ],
+        )
+    )
+    with pytest.raises(InputError, match="rows overlap"):
+        seq[1]
+
+
+@pytest.mark.parametrize(
+    ("kw", "needle"),
+    [
+        ({"offsets": (0, 4, 12)}, "does not fit point_step"),  # z ends beyond point_step
+        ({"offsets": (0, 4, -8)}, "does not fit point_step"),  # negative offset
+        ({"counts": (1, 1, 2**40)}, "does not fit point_step"),  # count beyond a C int
+        ({"offsets": (0, 2, 8)}, "overlap"),  # x and y overlap
+        ({"step": 2**20}, "point_step"),
+    ],
+)
+def test_bad_field_layouts_are_input_errors(kw, needle):  # case 3
+    m = pc2(cloud(0), 0.0, **kw)
+    with pytest.raises(InputError, match=needle):
+        decode_pointcloud2(m)
+
+
+def test_short_data_is_an_input_error():  # case 3 (total size vs data length)
+    m = pc2(cloud(0), 0.0, data=cloud(0).astype("<f4").tobytes()[:-1])
+    with pytest.raises(InputError, match="too few"):
+        decode_pointcloud2(m)
+
+
+def test_equal_stamps_refused_duplicates_dropped_frame_ids_warned(tmp_path, caplog):  # case 4
+    same = [pc2(cloud(k), 5.0) for k in range(12)]
+    with pytest.raises(InputError, match="same header stamp"):
+        BagSequence(write_bag(tmp_path / "same.bag", same))
+    dup = [pc2(cloud(k), float(k)) for k in range(4)]
+    dup.insert(2, dup[1])
+    alt = [pc2(cloud(k), float(k), frame="a" if k % 2 else "b") for k in range(4)]
+    with caplog.at_level(logging.WARNING, logger="relnav.io"):
+        seq = BagSequence(write_bag(tmp_path / "dup.bag", dup))
+        assert len(seq) == 4
+        np.testing.assert_array_equal(seq.timestamps, [0.0, 1.0, 2.0, 3.0])
+        np.testing.assert_array_equal(seq[2].points, cloud(2).astype("f4"))
+        assert "duplicated message" in caplog.text
+        BagSequence(write_bag(tmp_path / "alt.bag", alt))
+        assert "2 different frame_ids" in caplog.text
+
+
+def test_misread_bytes_leak_no_numpy_warning():  # case 5
+    raw = np.full(300, 0xFF, dtype=np.uint8).tobytes()  # NaN patterns as float32
+    m = pc2(np.zeros((25, 3)), 0.0, data=raw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pts = decode_pointcloud2(m)
+    assert pts.shape == (0, 3)
+    absurd = np.full((25, 3), 3e30, dtype="<f4").tobytes()
+    with pytest.raises(InputError, match="misread"):
+        decode_pointcloud2(pc2(np.zeros((25, 3)), 0.0, data=absurd))
+
+
+def test_decode_accepts_duck_typed_messages():
+    f = SimpleNamespace
+    m = f(
+        fields=[f(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")],
+        height=1,
+        width=2,
+        point_step=12,
+        row_step=24,
+        is_bigendian=False,
+        data=np.arange(6, dtype="<f4").tobytes(),
+    )
+    np.testing.assert_array_equal(decode_pointcloud2(m), [[0, 1, 2], [3, 4, 5]])
+
+
+# --- text encodings -----------------------------------------------------------------------
+
+BAD_UTF8 = b"0.0\n1.0\n\xff\xfe\x00 2.0\n"
+
+
+def _plain(tmp_path: Path, n: int = 4) -> Path:
+    d = tmp_path / "plain"
+    d.mkdir()
+    for k in range(n):
+        write_points(d / f"{k:03d}.ply", cloud(k))
+    return d
+
+
+@pytest.mark.parametrize("name", ["timestamps.txt", "times.txt"])
+def test_undecodable_times_name_file_and_offset(tmp_path, name):  # text encodings
+    d = _plain(tmp_path)
+    (d / name).write_bytes(BAD_UTF8)
+    with pytest.raises(InputError, match=rf"{name}.*byte offset 8"):
+        open_sequence(d)
+
+
+def test_undecodable_sensor_yaml_kitti_calib_and_tum(tmp_path, rng):  # text encodings
+    from relnav.io.sequences import ScanSequence, write_sequence
+    from relnav.io.trajectories import read_tum
+
+    seq = write_sequence(tmp_path / "seq", [cloud(k) for k in range(3)], np.arange(3.0))
+    (seq / "sensor.yaml").write_bytes(b"name: \xc3\x28\n")
+    with pytest.raises(InputError, match=r"sensor.yaml.*byte offset 6"):
+        ScanSequence(seq)
+    kitti = tmp_path / "kitti" / "00"
+    (kitti / "velodyne").mkdir(parents=True)
+    for k in range(2):
+        cloud(k).astype("<f4").tofile(kitti / "velodyne" / f"{k:06d}.bin")
+    (kitti / "poses.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 2)
+    (kitti / "calib.txt").write_bytes(b"P0: 1 2 3\nTr: \x80\n")
+    with pytest.raises(InputError, match=r"calib.txt.*byte offset 14"):
+        open_sequence(kitti)
+    (tmp_path / "gt.tum").write_bytes(b"0 0 0 0 0 0 0 1\n\xe9\n")
+    with pytest.raises(InputError, match=r"gt.tum.*byte offset 16"):
+        read_tum(tmp_path / "gt.tum")
+
+
+def test_undecodable_scenario_and_grid_yaml(tmp_path):  # text encodings
+    from relnav.bench.grid import load_grid
+    from relnav.sim.scenario import load_scenario
+
+    p = tmp_path / "bad.yaml"
+    p.write_bytes(b"name: caf\xe9\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml.*byte offset 9"):
+        load_scenario(p)
+    with pytest.raises(ConfigError, match=r"bad.yaml.*byte offset 9"):
+        load_grid(p)
+
+
+@pytest.mark.parametrize(("times", "kind"), [("0 1 1 2", "duplicate"), ("3 2 1 0", "decreasing")])
+def test_plain_folder_times_must_increase(tmp_path, times, kind):  # plain folders, case 14
+    d = _plain(tmp_path)
+    (d / "times.txt").write_text("\n".join(times.split()) + "\n")
+    with pytest.raises(InputError, match=kind) as e:
+        open_sequence(d)
+    assert "np.float64" not in str(e.value)
+    assert "1.0 s at scan 2" in str(e.value) or "2.0 s at scan 1" in str(e.value)
+
+
+def test_errors_are_relnav_errors():
+    assert issubclass(InputError, RelnavError)
+    assert struct.calcsize("<f") == 4  # the layouts above assume 4-byte float32
