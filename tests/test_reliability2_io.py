@@ -16,7 +16,7 @@ import pytest
 
 from relnav.errors import ConfigError, InputError, RelnavError
 from relnav.io.bags import BagSequence, decode_pointcloud2
-from relnav.io.pointclouds import write_points
+from relnav.io.pointclouds import read_points, write_points
 from relnav.io.sources import open_sequence
 
 pytest.importorskip("rosbags")
@@ -250,3 +250,65 @@ def test_plain_folder_times_must_increase(tmp_path, times, kind):  # plain folde
 def test_errors_are_relnav_errors():
     assert issubclass(InputError, RelnavError)
     assert struct.calcsize("<f") == 4  # the layouts above assume 4-byte float32
+
+
+# --- archives and headers -----------------------------------------------------------------
+
+
+def _patched(src: Path, dst: Path, offset: int, fmt: str, value: int) -> Path:
+    raw = bytearray(src.read_bytes())
+    struct.pack_into(fmt, raw, offset, value)
+    dst.write_bytes(bytes(raw))
+    return dst
+
+
+@pytest.mark.parametrize("ext", [".laz", ".las"])
+def test_las_laz_huge_point_count_is_refused_before_laspy(tmp_path, ext):  # case 6
+    src = write_points(tmp_path / f"ok{ext}", cloud(0, 200))
+    np.testing.assert_allclose(read_points(src), cloud(0, 200), atol=1e-5)
+    bad = _patched(src, tmp_path / f"bad{ext}", 107, "<I", 1_923_080_680)  # 38 GB of records
+    with pytest.raises(InputError, match=r"claims 1923080680 points|truncated LAS"):
+        read_points(bad)
+
+
+def test_las_claiming_a_billion_vlrs_is_refused(tmp_path):  # case 7
+    src = write_points(tmp_path / "ok.las", cloud(0, 20))
+    bad = _patched(src, tmp_path / "bad.las", 100, "<I", 1_400_000_000)
+    with pytest.raises(InputError, match="1400000000 VLRs"):
+        read_points(bad)
+
+
+def _lzf_bomb(n_refs: int) -> bytes:
+    """A valid LZF stream of ``12 + 264·n_refs`` zero bytes: a literal byte, back references
+    of 264 bytes each, and an 11-byte literal."""
+    return b"\x00\x00" + b"\xe0\xff\x00" * n_refs + b"\x0a" + b"\x00" * 11
+
+
+def test_pcd_lzf_bomb_is_refused_before_decompressing(tmp_path, monkeypatch):  # case 8
+    import relnav.io.pointclouds.pcd as pcd
+
+    n_refs = 36_000  # 108 kB of LZF -> 9.5 MB of x y z float32
+    stream = _lzf_bomb(n_refs)
+    usize = 12 + 264 * n_refs
+    n = usize // 12
+    assert len(pcd.lzf_decompress(stream, usize)) == usize  # a real, decodable stream
+    header = (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+        f"WIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary_compressed\n"
+    ).encode()
+    body = struct.pack("<II", len(stream), n * 12) + stream
+    p = tmp_path / "bomb.pcd"
+    p.write_bytes(header + body)
+    monkeypatch.setattr(pcd, "LZF_MIN_BUDGET", 0)  # as if the file claimed more than 64 MiB
+    with pytest.raises(InputError, match=r"claims \d+ bytes from"):
+        read_points(p)
+
+
+def test_pcd_huge_count_is_an_input_error(tmp_path):  # case 9
+    p = tmp_path / "count.pcd"
+    p.write_bytes(
+        b"VERSION 0.7\nFIELDS x y z w\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 99999999999\n"
+        b"WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA binary\n" + b"\0" * 16
+    )
+    with pytest.raises(InputError, match="COUNT 99999999999"):
+        read_points(p)

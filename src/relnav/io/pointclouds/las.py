@@ -16,9 +16,71 @@ _LAS_FLOAT_INTENSITY = "intensity_f64"
 _LAS_FIXED_DATE = _dt.date(2000, 1, 1)
 
 
+LAZ_MAX_EXPANSION = 1000
+"""A LAZ file may claim at most this many times its size in point records (or
+:data:`LAZ_MIN_BUDGET` bytes, whichever is larger). **[interpretation]** Real scans compress
+3-10x; a file claiming more is refused before the decompressor allocates the records."""
+LAZ_MIN_BUDGET = 64 << 20
+"""Bytes of point records a LAZ file may always claim, whatever its size (a constant cloud
+compresses over 1000x)."""
+_VLR_HEADER = 54
+_EVLR_HEADER = 60
+
+
+def _check_las_header(p: Path) -> None:
+    """Check the LAS/LAZ public header block against the file size before laspy (and its LAZ
+    decompressor) see it: header size, point data offset, VLR/EVLR counts and the point
+    count times the record length. InputError naming the first inconsistency."""
+    import struct
+
+    size = p.stat().st_size
+    with p.open("rb") as f:
+        head = f.read(375)
+    if len(head) < 227:
+        raise InputError(f"{p}: truncated LAS/LAZ header ({len(head)} bytes, at least 227)")
+    minor = head[25]
+    header_size, offset, n_vlrs = struct.unpack_from("<HII", head, 94)
+    fmt_byte, rec_len, n_legacy = struct.unpack_from("<BHI", head, 104)
+    if not 227 <= header_size <= min(size, 65535):
+        raise InputError(f"{p}: LAS header size {header_size} is impossible for this file")
+    if not header_size <= offset <= size:
+        raise InputError(
+            f"{p}: LAS point data offset {offset} is outside the file ({size} bytes, header "
+            f"{header_size})"
+        )
+    if n_vlrs * _VLR_HEADER > offset - header_size:
+        raise InputError(
+            f"{p}: LAS header claims {n_vlrs} VLRs, but only {offset - header_size} bytes "
+            "separate the header from the points"
+        )
+    n_points = n_legacy
+    if minor >= 4 and len(head) >= 255:
+        start_evlr, n_evlrs, n_points64 = struct.unpack_from("<QIQ", head, 235)
+        n_points = max(n_points, n_points64)
+        if n_evlrs and (start_evlr > size or n_evlrs * _EVLR_HEADER > size - start_evlr):
+            raise InputError(f"{p}: LAS header claims {n_evlrs} EVLRs the file cannot hold")
+    if rec_len == 0 and n_points:
+        raise InputError(f"{p}: LAS point record length is 0")
+    need = n_points * rec_len
+    compressed = bool(fmt_byte & 0xC0)
+    if compressed:
+        budget = max(LAZ_MIN_BUDGET, LAZ_MAX_EXPANSION * size)
+        if need > budget:
+            raise InputError(
+                f"{p}: LAZ header claims {n_points} points ({need} bytes) from a {size}-byte "
+                f"file (more than {LAZ_MAX_EXPANSION}x): corrupt header"
+            )
+    elif need > size - offset:
+        raise InputError(
+            f"{p}: truncated LAS file: header claims {n_points} points of {rec_len} bytes "
+            f"({need} bytes), the file holds {size - offset} after the header"
+        )
+
+
 def _read_las(p: Path) -> _Cloud:
     import laspy
 
+    _check_las_header(p)
     try:
         las = laspy.read(p)
         pts = np.column_stack(

@@ -35,6 +35,18 @@ _PCD_TYPES = {
 }
 
 
+PCD_MAX_COUNT = 1 << 16
+"""Largest PCD field COUNT accepted (PCL's largest descriptor, SHOT colour, has 1 344)."""
+LZF_RATIO_LIMIT = 88
+"""LZF cannot expand beyond this: a 3-byte back reference yields at most 264 bytes."""
+LZF_MAX_EXPANSION = 32
+"""**[interpretation]** A ``binary_compressed`` PCD may claim at most this many times its file
+size decompressed (or :data:`LZF_MIN_BUDGET` bytes); real point data compress 1.2-4x with LZF,
+a larger claim is a decompression bomb."""
+LZF_MIN_BUDGET = 64 << 20
+"""Decompressed bytes a ``binary_compressed`` PCD may always claim, whatever its size."""
+
+
 @njit(cache=True)
 def _lzf_decompress_nb(src: np.ndarray, out: np.ndarray) -> int:  # pragma: no cover - numba
     """LZF decode ``src`` into ``out``; bytes written, or ``-1`` on a malformed stream."""
@@ -177,6 +189,11 @@ def _read_pcd(p: Path) -> _Cloud:
         raise InputError(f"{p}: PCD WIDTH*HEIGHT = {width * height} but POINTS = {npts}")
     if npts < 0 or any(c < 1 for c in counts):
         raise InputError(f"{p}: PCD header has a negative POINTS or a COUNT below 1")
+    if any(c > PCD_MAX_COUNT for c in counts) or any(s > 8 for s in sizes):
+        raise InputError(
+            f"{p}: PCD header COUNT {max(counts)} or SIZE {max(sizes)} beyond any real field "
+            f"(COUNT up to {PCD_MAX_COUNT}, SIZE up to 8)"
+        )
     bases = []
     for f, s, t in zip(fields, sizes, types, strict=True):
         if (t, s) not in _PCD_TYPES:
@@ -253,6 +270,13 @@ def _read_pcd(p: Path) -> _Cloud:
             if usize != need:
                 raise InputError(
                     f"{p}: PCD binary_compressed uncompressed size {usize} != expected {need}"
+                )
+            budget = max(LZF_MIN_BUDGET, LZF_MAX_EXPANSION * len(raw))
+            if usize > min(budget, LZF_RATIO_LIMIT * csize + 8):
+                raise InputError(
+                    f"{p}: PCD binary_compressed claims {usize} bytes from {csize} compressed "
+                    f"bytes (a {len(raw)}-byte file): more than this reader accepts "
+                    f"({LZF_MAX_EXPANSION}x the file, or LZF's own limit {LZF_RATIO_LIMIT}x)"
                 )
             if len(body) < 8 + csize:
                 raise InputError(
