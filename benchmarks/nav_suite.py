@@ -327,19 +327,26 @@ JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
 """The stress group's white attitude jitter levels (degrees per axis per frame)."""
 
 
+ATTITUDE_SIGMA = 0.01
+"""1σ per axis (degrees) of the chaser's measured attitude written beside the jitter sequences
+(``chaser_attitude.tum``: a star tracker's order of magnitude)."""
+
+
 def _jittered(sc: dict[str, Any], jitter: float, kind: str = "white") -> dict[str, Any]:
     """``sc`` with 5 cm range noise and sensor attitude jitter ``jitter`` degrees per axis."""
     sensor = {**sc["sensors"][0], "overrides": {**sc["sensors"][0]["overrides"]}}
     sensor["overrides"]["range_sigma"] = 0.05
-    return {**sc, "sensors": [sensor], "pointing": {"jitter_deg": jitter, "jitter_kind": kind}}
+    pointing = {"jitter_deg": jitter, "jitter_kind": kind, "attitude_sigma_deg": ATTITUDE_SIGMA}
+    return {**sc, "sensors": [sensor], "pointing": pointing}
 
 
 def stress() -> dict[str, dict[str, Any]]:
     """Motion the constant-velocity prior does not predict and scans with few points (issue
     "the navigator when motion is not smooth"): sensor attitude jitter 0.25–2° per axis per
     frame (white, and a random walk) with 5 cm range noise on a box-and-panel satellite's
-    orbit (procedural Envisat); a ~30-point-per-scan orbit of a 10 m satellite at 40–60 m; a start at 40 m with
-    ≤ 15 points per scan closing to 15 m. Made after the suite's parameters were frozen."""
+    orbit (procedural Envisat); a ~30-point-per-scan orbit of a 10 m satellite at 40–60 m; a
+    start at 40 m with ≤ 15 points per scan closing to 15 m. Made after the suite's parameters
+    were frozen."""
     s: dict[str, dict[str, Any]] = {}
     base = {
         "target": {"name": "envisat", "scale_to": 16.0},
@@ -489,8 +496,9 @@ def step_errors(est: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def judge_steps(run: Any, gt: np.ndarray) -> tuple[np.ndarray, ...]:
     """The suite's verdict on a run's steps 1 … K − 1: translation (m) and rotation (deg)
-    errors (:func:`step_errors`), wrong (beyond 0.5 m or 5°) and flagged (not ``ok``)."""
-    et, er = step_errors(np.asarray(run.poses), np.asarray(gt))
+    errors (:func:`step_errors`) of the causal poses (the ones each step's flag was given
+    with), wrong (beyond 0.5 m or 5°) and flagged (not ``ok``)."""
+    et, er = step_errors(np.asarray(run.online_poses), np.asarray(gt))
     wrong = (et > 0.5) | (er > 5.0)
     flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]], dtype=bool)
     return et, er, wrong, flagged
@@ -512,12 +520,23 @@ def warm_up(seq_dir: Path, methods: list[str], relnav_options: dict[str, str]) -
             pass
 
 
+def attitude_input(seq_dir: Path) -> Any:
+    """The sequence's measured chaser attitude (``chaser_attitude.tum``) with the σ it was
+    simulated with, for relnav's ``attitude`` input (``-O attitude=1``)."""
+    from relnav.config import load_yaml
+    from relnav.navigation.attitude_input import AttitudeInput
+
+    sigma = load_yaml(seq_dir / "scenario.yaml")["pointing"]["attitude_sigma_deg"]
+    return AttitudeInput.from_tum(seq_dir / "chaser_attitude.tum", float(sigma))
+
+
 def run_method(
     seq_dir: Path, method: str, per_step: bool = False, **options: Any
 ) -> dict[str, Any]:
-    """Run one method on one sequence; APE/RPE (no alignment), wrong and flagged steps, ms
-    (``relnav`` with the :data:`MISSION` input unless ``options`` override it); ``per_step``
-    adds the steps' arrays under ``"steps"``."""
+    """Run one method on one sequence; APE/RPE (no alignment) of the causal trajectory (what a
+    real-time loop has: every peer's), wrong and flagged steps, ms (``relnav`` with the
+    :data:`MISSION` input unless ``options`` override it); a smoother's trajectory's APE/RPE
+    under ``"smoothed"``; ``per_step`` adds the steps' arrays under ``"steps"``."""
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.odometry import run_sequence
@@ -525,10 +544,12 @@ def run_method(
     seq = ScanSequence(seq_dir)
     if method == "relnav":
         options = {**MISSION, **options}
+        if str(options.pop("attitude", "")).lower() in ("1", "true", "yes"):
+            options["attitude"] = attitude_input(seq_dir)
     t0 = time.perf_counter()
     run = run_sequence(seq, method, **options)
     wall = time.perf_counter() - t0
-    m = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
+    m = evaluate_trajectories(run.timestamps, run.online_poses, seq.timestamps, seq.gt_poses)
     et, _, wrong, flagged = judge_steps(run, seq.gt_poses)
     out = {
         "ape": m["ape_trans_rmse"],
@@ -547,6 +568,14 @@ def run_method(
             bool(s.result is not None and s.result.info.get("revisit_alarm")) for s in run.steps
         ),
     }
+    if run.causal_poses is not None:  # the smoother's look-ahead trajectory, as what it is
+        ms = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps, seq.gt_poses)
+        out["smoothed"] = {
+            "ape": ms["ape_trans_rmse"],
+            "ape_r": ms["ape_rot_rmse_deg"],
+            "rpe_t": ms["rpe_trans_rmse"],
+            "rpe_r": ms["rpe_rot_rmse_deg"],
+        }
     if per_step:  # arrays (not JSON): each step's error, flag, own 1σ (m) and exceedance
         info = [s.result.info if s.result is not None else {} for s in run.steps[1:]]
         out["steps"] = {

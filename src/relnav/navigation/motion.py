@@ -59,6 +59,7 @@ class ConstantVelocityFilter:
         self.smoothed: list[np.ndarray] = []
         self._F: np.ndarray | None = None
         self._clone: tuple[np.ndarray, np.ndarray] | None = None
+        self._raw_pred: tuple[np.ndarray, np.ndarray] | None = None
         self.step_covariance: np.ndarray | None = None
 
     def adapt(self, chi2: float, dof: int = 6, rate: float = 0.1, max_scale: float = 100.0) -> None:
@@ -91,8 +92,38 @@ class ConstantVelocityFilter:
         T_pred = self.pose @ step
         self._v_pred = self.velocity.copy()
         self._pred = (T_pred, 0.5 * (P + P.T), float(t))
+        self._raw_pred = None
         self._F = F
         return T_pred.copy(), self._pred[1][:6, :6].copy()
+
+    def observe_rotation(
+        self, R_meas: np.ndarray, noise: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Update the prediction with a measurement ``R_meas`` (3×3) of the predicted pose's
+        rotation, noise covariance ``noise`` (3×3, rad², body frame): an EKF update of the whole
+        error state (``y = log(R_predᵀ R_meas)`` observes ``δp``'s rotation part). Returns the
+        updated ``(T_pred, P_pp)``. The smoother keeps the model's own prediction (its
+        backward pass needs only the filtered states and the model's predictions)."""
+        from relnav.geometry.rotations import matrix_to_rotvec
+
+        assert self._pred is not None, "predict() first"
+        T_pred, P, t = self._pred
+        y = np.asarray(matrix_to_rotvec(T_pred[:3, :3].T @ R_meas), dtype=float).reshape(3)
+        S = P[3:6, 3:6] + np.asarray(noise, dtype=float)
+        try:
+            K = np.linalg.solve(S, P[3:6, :]).T  # (12, 3) = P Hᵀ S⁻¹
+        except np.linalg.LinAlgError:
+            return T_pred.copy(), P[:6, :6].copy()
+        dx = K @ y
+        T_new = T_pred @ exp_se3(dx[:6])
+        P_new = P - K @ P[3:6, :]
+        self.velocity = self.velocity + dx[6:]
+        if self._clone is not None:  # the previous pose's cross-covariance with the state
+            Pc, C = self._clone
+            self._clone = (Pc, C - K @ C[3:6, :])
+        self._raw_pred = self._raw_pred or (T_pred, P)
+        self._pred = (T_new, 0.5 * (P_new + P_new.T), t)
+        return T_new.copy(), self._pred[1][:6, :6].copy()
 
     def widen(self, sigma_pose: np.ndarray, sigma_velocity: np.ndarray | None = None) -> None:
         """Add ``sigma_pose²`` (body frame, 6) to the predicted pose covariance, and
@@ -131,7 +162,7 @@ class ConstantVelocityFilter:
         self.P = 0.5 * (P + P.T)
         self.pose = np.array(T_star, dtype=np.float64)
         self.t = t
-        self._record(T_pred, P_prior)
+        self._record(*(self._raw_pred or (T_pred, P_prior)))
         self._pred = None
 
     def skip(self) -> None:
@@ -141,7 +172,7 @@ class ConstantVelocityFilter:
         if self._clone is not None:
             self._set_step_covariance(T_pred, P, *self._clone)
         self.pose, self.P, self.t = T_pred, P, t
-        self._record(T_pred, P)
+        self._record(*(self._raw_pred or (T_pred, P)))
         self._pred = None
 
     def _set_step_covariance(

@@ -36,7 +36,6 @@ on the navigation suite (``benchmarks/nav_suite.py``), then frozen.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
@@ -48,6 +47,8 @@ from scipy.spatial import cKDTree
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
+from relnav.navigation.attitude_input import AttitudeInput, aided_prediction
+from relnav.navigation.exceedance import exceedance_probability
 from relnav.navigation.gicp import (
     ScanToMapFit,
     degeneracy,
@@ -85,48 +86,6 @@ def _rms_radius(P: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
 
 
-@functools.cache
-def _unit_normals(n: int = 4096) -> np.ndarray:
-    """Fixed standard-normal draws ``(n, 6)`` (seed 0): deterministic probabilities."""
-    return np.random.default_rng(0).standard_normal((n, 6))
-
-
-def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> float:
-    """Probability that a step error ``e ~ N(0, C)`` exceeds ``limit_t`` in translation or
-    ``limit_r`` in rotation.
-
-    Parameters
-    ----------
-    C : (6, 6) float64
-        Covariance of the step's error twist ``[ρ, φ]`` (m, rad), e.g. the filter's
-        ``step_covariance`` (body frame).
-    limit_t : float
-        Translation limit on ``|ρ|`` (m).
-    limit_r : float
-        Rotation limit on ``|φ|`` (rad).
-
-    Returns
-    -------
-    float
-        ``P(|ρ| > limit_t or |φ| > limit_r)`` in [0, 1], estimated from 4096 fixed draws
-        (standard error at most 0.008); 1 for a non-finite ``C``.
-
-    Notes
-    -----
-    The two norms are correlated through ``C``'s off-diagonal block, so the joint event is
-    counted on draws of the whole twist (no closed form for a union of two generalised χ²).
-    """
-    C = np.asarray(C, dtype=np.float64)
-    if not np.all(np.isfinite(C)):
-        return 1.0
-    w, U = np.linalg.eigh(0.5 * (C + C.T))
-    e = _unit_normals() @ (U * np.sqrt(np.maximum(w, 0.0))).T
-    out = (np.einsum("ij,ij->i", e[:, :3], e[:, :3]) > limit_t**2) | (
-        np.einsum("ij,ij->i", e[:, 3:], e[:, 3:]) > limit_r**2
-    )
-    return float(np.mean(out))
-
-
 def _spacing(P: np.ndarray) -> float:
     """Median nearest-neighbour distance of a cloud (m)."""
     d, _ = cKDTree(P).query(P, k=2)
@@ -141,17 +100,26 @@ class Navigator:
     ----------
     initial_pose : (4, 4) float64, optional
         ``T_target_sensor`` of the first frame (identity by default).
+    attitude : AttitudeInput, optional
+        The chaser's measured attitude: the rotation of each step's prior (:mod:`.attitude_input`).
     **options
         Fields of :class:`NavigatorConfig`.
     """
 
     name = "relnav"
 
-    def __init__(self, *, initial_pose: np.ndarray | None = None, **options: Any) -> None:
+    def __init__(
+        self,
+        *,
+        initial_pose: np.ndarray | None = None,
+        attitude: AttitudeInput | None = None,
+        **options: Any,
+    ) -> None:
         from relnav.config import check_options
 
         options = check_options(NavigatorConfig, options, where="method 'relnav'")
         self.config = NavigatorConfig(**options)
+        self.attitude = attitude
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.map: VoxelMap | None = None
         self.full_scan = np.zeros((0, 3))  # the frame's finite points before the point budget
@@ -269,6 +237,8 @@ class Navigator:
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
         T_pred, P_pp = self.motion.predict(t)
+        if self.attitude is not None:  # the chaser's measured rotation over the step
+            T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
         self.repeats.observe_rays(P)
         try:
             result = self._register(P, T_pred, P_pp, timings)
@@ -870,6 +840,8 @@ class Navigator:
             out["start_up"] = [dict(r) for r in self.refinements]
         if self.revisits is not None and self.revisits.checks:
             out["revisits"] = self.revisits.summary()
+        if self.attitude is not None:
+            out["attitude_input"] = self.attitude.describe()
         return out
 
     def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:

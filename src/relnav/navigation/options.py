@@ -148,7 +148,7 @@ class NavigatorConfig:
         Honest step flags (0 = off): an ``ok`` step whose probability of being off by more than
         ``flag_limit_t`` metres or ``flag_limit_r_deg`` degrees exceeds this, under the filter's
         step covariance (a zero-mean Gaussian, body frame;
-        :func:`relnav.navigation.navigator.exceedance_probability`), gets the status
+        :func:`relnav.navigation.exceedance.exceedance_probability`), gets the status
         ``flagged``: its pose, the filter and the map are those of an ``ok`` step (the flag
         changes no pose), and the probability is recorded as ``info["exceed_probability"]``.
         **[measured]** Per-step signals against the suite's wrong steps (ground truth for

@@ -33,6 +33,7 @@ files; changing a sensor's parameters does not change the other sensors' noise.
 from __future__ import annotations
 
 import logging
+import math
 import re
 import time
 from collections.abc import Callable
@@ -183,10 +184,15 @@ class PointingSpec(StrictModel):
     frames: a limit-cycling attitude control, thruster firings) or ``random-walk`` (the
     per-frame increments are white with that σ: a drifting attitude). The jitter is part of
     the ground truth (:func:`relnav.sim.trajectories.pointing_poses`).
+    ``attitude_sigma_deg``: when set, :func:`simulate` also writes ``chaser_attitude.tum``, the
+    primary sensor's inertial attitude ``R_W_sensor`` per frame as the chaser's star tracker /
+    IMU would measure it (white noise of that σ per axis, degrees; seeded; position columns
+    zero): the navigator's optional rotation input.
     """
 
     jitter_deg: float | Vec3 = 0.0
     jitter_kind: Literal["white", "random-walk"] = "white"
+    attitude_sigma_deg: float | None = Field(default=None, ge=0, allow_inf_nan=False)
     up: Vec3 = (0.0, 0.0, 1.0)
     target: Vec3 = (0.0, 0.0, 0.0)
 
@@ -622,6 +628,30 @@ def _poses(sc: Scenario, jitter_ss: np.random.SeedSequence, n_keep: int | None =
     return _Poses(times, T_W_rig, T_W_target)
 
 
+CHASER_ATTITUDE_FILE = "chaser_attitude.tum"
+"""The chaser's measured inertial attitude in a simulated sequence folder (when asked for)."""
+
+
+def _write_chaser_attitude(
+    out: Path,
+    times: np.ndarray,
+    T_W_sensor: np.ndarray,
+    pointing: PointingSpec,
+    ss: np.random.SeedSequence,
+) -> None:
+    """``chaser_attitude.tum``: ``R_W_sensor · exp([δ]×)``, ``δ ~ N(0, σ² I₃)`` per frame
+    (``σ = pointing.attitude_sigma_deg``), position columns zero."""
+    from relnav.geometry.rotations import rotvec_to_matrix
+    from relnav.io.trajectories import write_tum
+
+    n = len(times)
+    sigma = math.radians(float(pointing.attitude_sigma_deg or 0.0))
+    delta = np.random.default_rng(ss).normal(0.0, 1.0, (n, 3)) * sigma
+    A = np.tile(np.eye(4), (n, 1, 1))
+    A[:, :3, :3] = T_W_sensor[:, :3, :3] @ rotvec_to_matrix(delta)
+    write_tum(out / CHASER_ATTITUDE_FILE, times, A)
+
+
 def _check_output_free(out: Path, sc: Scenario, overwrite: bool) -> None:
     """The error :class:`SequenceWriter` would raise for existing scans, raised up front."""
     from relnav.io.sequences import POINT_READ_EXTENSIONS, sequence_layout
@@ -776,6 +806,9 @@ def simulate(
         for w in writers:
             w.close()
         atomic_write_text(out / "scenario.yaml", scenario_yaml(resolved))
+        if sc.pointing.attitude_sigma_deg is not None:
+            T_s = poses.T_W_rig[:n_sim] @ sc.sensors[0].T_rig_sensor
+            _write_chaser_attitude(out, poses.times[:n_sim], T_s, sc.pointing, children[1])
         timings["write"] += time.perf_counter() - tw
     finally:
         for w in writers:

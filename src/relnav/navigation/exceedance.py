@@ -1,0 +1,52 @@
+"""The probability that a step's error exceeds an alert limit under its covariance: the
+navigator's ``flagged`` label (:meth:`relnav.navigation.navigator.Navigator._judge_integrity`)."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["exceedance_probability"]
+
+
+@functools.cache
+def _unit_normals(n: int = 4096) -> np.ndarray:
+    """Fixed standard-normal draws ``(n, 6)`` (seed 0): deterministic probabilities."""
+    return np.random.default_rng(0).standard_normal((n, 6))
+
+
+def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> float:
+    """Probability that a step error ``e ~ N(0, C)`` exceeds ``limit_t`` in translation or
+    ``limit_r`` in rotation.
+
+    Parameters
+    ----------
+    C : (6, 6) float64
+        Covariance of the step's error twist ``[ρ, φ]`` (m, rad), e.g. the filter's
+        ``step_covariance`` (body frame).
+    limit_t : float
+        Translation limit on ``|ρ|`` (m).
+    limit_r : float
+        Rotation limit on ``|φ|`` (rad).
+
+    Returns
+    -------
+    float
+        ``P(|ρ| > limit_t or |φ| > limit_r)`` in [0, 1], estimated from 4096 fixed draws
+        (standard error at most 0.008); 1 for a non-finite ``C``.
+
+    Notes
+    -----
+    The two norms are correlated through ``C``'s off-diagonal block, so the joint event is
+    counted on draws of the whole twist (no closed form for a union of two generalised χ²).
+    """
+    C = np.asarray(C, dtype=np.float64)
+    if not np.all(np.isfinite(C)):
+        return 1.0
+    w, U = np.linalg.eigh(0.5 * (C + C.T))
+    e = _unit_normals() @ (U * np.sqrt(np.maximum(w, 0.0))).T
+    out = (np.einsum("ij,ij->i", e[:, :3], e[:, :3]) > limit_t**2) | (
+        np.einsum("ij,ij->i", e[:, 3:], e[:, 3:]) > limit_r**2
+    )
+    return float(np.mean(out))
