@@ -6,7 +6,7 @@ Every error a user can cause (bad file, bad config, impossible request) derives 
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "EstimationError", "InputError", "RelnavError"]
+__all__ = ["ConfigError", "EstimationError", "InputError", "OutputError", "RelnavError"]
 
 
 class RelnavError(Exception):
@@ -23,3 +23,8 @@ class ConfigError(RelnavError):
 
 class EstimationError(RelnavError):
     """An estimation could not be carried out (e.g. not enough matched poses to evaluate)."""
+
+
+class OutputError(RelnavError):
+    """An output cannot be written: a read-only or full file system, or an output folder in use
+    by another run. The message names the path and the reason."""

@@ -166,10 +166,10 @@ def run_info(
 
 def write_run_info(folder: str | Path, doc: dict[str, Any]) -> Path:
     """Write ``doc`` (from :func:`run_info`) to ``folder/run.json``."""
+    from relnav.atomic import atomic_write_text
+
     p = Path(folder) / RUN_FILE
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(_clean(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    return p
+    return atomic_write_text(p, json.dumps(_clean(doc), indent=2, allow_nan=False) + "\n")
 
 
 def read_run_info(folder: str | Path) -> dict[str, Any] | None:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from relnav._threads import limit_blas_threads
-from relnav.errors import InputError
+from relnav.errors import ConfigError, InputError
 from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
 from relnav.registration.base import Registration
 from relnav.scan import Scan
@@ -219,7 +219,12 @@ class _RunWriter:
             remove_stale_temps(p)
         self._tmp = {k: temp_name(p) for k, p in self.paths.items()}
         self._est = self._tmp["estimate"].open("w", encoding="ascii")
-        self._diag = self._tmp["diagnostics"].open("w", newline="")
+        try:
+            self._diag = self._tmp["diagnostics"].open("w", newline="")
+        except BaseException:
+            self._est.close()
+            self._tmp["estimate"].unlink(missing_ok=True)
+            raise
         self._csv = csv.DictWriter(self._diag, fieldnames=list(DIAGNOSTIC_COLUMNS))
         self._csv.writeheader()
 
@@ -235,22 +240,32 @@ class _RunWriter:
         self._diag.flush()
 
     def close(self) -> None:
-        """Fsync and rename the files to their final names."""
-        import os
-
-        for f in (self._est, self._diag):
-            f.flush()
-            os.fsync(f.fileno())
-            f.close()
-        for k, p in self.paths.items():
-            os.replace(self._tmp[k], p)
+        """Fsync and rename the files to their final names (on a failure, e.g. a full disk:
+        the temporary files are deleted and the error raised)."""
+        try:
+            for f in (self._est, self._diag):
+                f.flush()
+                os.fsync(f.fileno())
+                f.close()
+            for k, p in self.paths.items():
+                os.replace(self._tmp[k], p)
+        except BaseException:
+            self.abort()
+            raise
 
     def abort(self) -> None:
-        """Close and delete the temporary files."""
+        """Close and delete the temporary files; never raises (it runs while another error,
+        e.g. a full disk, is being reported)."""
         for f in (self._est, self._diag):
-            f.close()
+            try:
+                f.close()
+            except OSError:  # the buffered rows could not be flushed (full disk)
+                pass
         for tmp in self._tmp.values():
-            tmp.unlink(missing_ok=True)
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:  # pragma: no cover - a folder gone read-only meanwhile
+                log.warning("could not remove %s", tmp)
 
     def __enter__(self) -> _RunWriter:
         return self
@@ -300,6 +315,7 @@ def run_sequence(
     out: str | Path | None = None,
     keep_steps: bool = True,
     strict: bool = False,
+    on_interrupt: str = "raise",
     **method_options: Any,
 ) -> OdometryRun:
     """Run frame-to-frame odometry over ``sequence``.
@@ -332,6 +348,10 @@ def run_sequence(
     strict : bool
         An unreadable scan (:class:`relnav.errors.InputError`) aborts the run. By default the
         frame is flagged ``failed`` with the reason and the run goes on.
+    on_interrupt : {"raise", "stop"}
+        On ``KeyboardInterrupt`` (Ctrl-C) during the frames: ``"raise"`` deletes the streamed
+        files and re-raises; ``"stop"`` ends the run at the last estimated frame and returns it
+        (``options["interrupted"]`` = ``{"at_frame", "of"}``; the smoother is not run).
     **method_options
         Passed to the registration factory; ``gate_rotation_deg``/``gate_translation`` and
         ``step_check``/``step_tolerance_m``/``step_tolerance_deg`` go to :class:`Odometry`.
@@ -344,6 +364,8 @@ def run_sequence(
 
     max_frames = check_max_frames(max_frames)
     initial_pose = parse_initial_pose(initial_pose)
+    if on_interrupt not in ("raise", "stop"):
+        raise ConfigError(f"on_interrupt must be 'raise' or 'stop', got {on_interrupt!r}")
     n = len(sequence) if max_frames is None else min(len(sequence), max_frames)
     if isinstance(initial_pose, str):
         gt = getattr(sequence, "gt_poses", None)
@@ -360,6 +382,8 @@ def run_sequence(
     flagged = np.zeros(n, dtype=bool)
     frame_time = np.zeros(n)
     writer = _RunWriter(out) if out is not None else None
+    interrupted: int | None = None
+    done = 0  # frames estimated and streamed
     try:
         with limit_blas_threads(blas_threads):
             for i in range(n):
@@ -382,15 +406,28 @@ def run_sequence(
                     steps.append(step)
                 if writer is not None:
                     writer.add(times[i], step.pose, diagnostic_row(i, times[i], step))
+                done = i + 1
                 if progress is not None:
                     progress(i, step)
+    except KeyboardInterrupt:
+        if on_interrupt != "stop":
+            if writer is not None:
+                writer.abort()
+            raise
+        # the frames estimated and streamed are kept; a frame half done is dropped
+        interrupted = k = done
+        log.warning("interrupted at frame %d of %d: keeping the %d frames estimated", k, n, k)
+        if keep_steps:
+            del steps[k:]
+        times, poses, used_prior = times[:k], poses[:k], used_prior[:k]
+        flagged, frame_time = flagged[:k], frame_time[:k]
     except BaseException:
         if writer is not None:
             writer.abort()
         raise
     finalize = getattr(odo, "finalize", None)
     causal: np.ndarray | None = None
-    if callable(finalize) and n:  # e.g. the navigator's fixed-lag smoother
+    if callable(finalize) and n and interrupted is None:  # e.g. the navigator's smoother
         final = np.asarray(finalize(), dtype=float)
         if final.shape == poses.shape and np.all(np.isfinite(final)):
             poses, causal = final, poses
@@ -412,8 +449,10 @@ def run_sequence(
         "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
     }
     report = getattr(odo, "final_report", None)  # what the tracker decided at the end
-    if callable(report) and n and (final_report := report()):
+    if callable(report) and n and interrupted is None and (final_report := report()):
         meta["finalize"] = final_report
+    if interrupted is not None:
+        meta["interrupted"] = {"at_frame": interrupted, "of": n}
     run = OdometryRun(
         name,
         times,
