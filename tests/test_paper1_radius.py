@@ -68,3 +68,17 @@ def test_extended_and_competitor_presets():
     odo = Odometry(method, **options)
     assert odo.registration.thresholds == "paper"
     assert odo.motion_prior == "identity"
+
+
+@pytest.mark.parametrize(("match_from", "bound"), [("target", 30), ("source", 50)])
+def test_matching_direction(match_from, bound):
+    """Paper 1 eq. 5 matches every feature of P_k (target) to its nearest in P_{k+1}: at most
+    one correspondence per target point; ``match_from="source"`` the other way round."""
+    from relnav.registration.feature import FeatureRegistration
+
+    rng = np.random.default_rng(1)
+    target = rng.normal(size=(30, 3))
+    source = np.vstack([target, rng.normal(size=(20, 3))])
+    reg = FeatureRegistration("hods", "none", "svd", tau=np.inf, match_from=match_from)
+    res = reg.register(source, target)
+    assert res.n_correspondences == bound

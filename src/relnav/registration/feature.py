@@ -10,7 +10,10 @@ Pipeline for a pair (source = scan ``k+1``, target = scan ``k``), ALGORITHMS §0
 2. Keypoints: every point (paper default) or a subsample (``keypoints="voxel"|"fps"|"iss"``).
 3. Normals (only for descriptors that need them): PCA, radius ``normal_radius_factor · Tr``,
    oriented towards the sensor (origin of the scan frame).
-4. Descriptors of both clouds; exact NN matching on unit-normalised descriptors with gate ``τ``.
+4. Descriptors of both clouds; exact NN matching on unit-normalised descriptors with gate ``τ``:
+   every descriptor of ``P_k`` (the target) to its nearest in ``P_{k+1}`` (paper 1 eq. 5,
+   ``match_from="target"``, default), or every source descriptor to its nearest in the target
+   (``match_from="source"``, relnav's former default).
 5. Grouping (GCC with ``ε = 2·Tr`` by default) → correspondences Ω.
 6. Estimator (recursive filter or SVD) → ``T_target_source``.
 7. Optional (a relnav extension, off by default): ``refine="icp-plane"`` (any registration
@@ -106,6 +109,10 @@ class FeatureRegistration:
         Descriptor-distance gate of the NN matching (paper 1: 1.0).
     mutual : bool
         Keep only mutual nearest neighbours.
+    match_from : {"target", "source"}
+        Direction of the NN matching: ``target`` (default, paper 1 eq. 5: each feature of
+        ``P_k`` to its nearest feature of ``P_{k+1}``) or ``source`` (each feature of
+        ``P_{k+1}`` to its nearest of ``P_k``).
     radius_from : {"source", "own"}
         ``source`` (default, paper 1): both clouds are described with the radius from the
         source's resolution; ``own``: each cloud with its own (relnav's option, reuses the
@@ -132,6 +139,7 @@ class FeatureRegistration:
         tau: float = 1.0,
         mutual: bool = False,
         radius_from: Literal["own", "source"] = "source",
+        match_from: Literal["target", "source"] = "target",
         min_points: int = 5,
         descriptor_options: dict[str, Any] | None = None,
         grouper_options: dict[str, Any] | None = None,
@@ -154,6 +162,9 @@ class FeatureRegistration:
         self.tau = float(tau)
         self.mutual = bool(mutual)
         self.radius_from = radius_from
+        if match_from not in ("target", "source"):
+            raise ConfigError(f"match_from must be 'target' or 'source', got {match_from!r}")
+        self.match_from = match_from
         self.min_points = int(min_points)
         self.descriptor_options = dict(descriptor_options or {})
         if self.descriptor_options:
@@ -287,6 +298,7 @@ class FeatureRegistration:
         self, source: CloudFeatures, target: CloudFeatures, *, init: np.ndarray | None = None
     ) -> RegistrationResult:
         """Register two prepared clouds; the source's timings are counted in the result."""
+        from relnav.matching.correspondences import Correspondences
         from relnav.matching.nn import match_descriptors
 
         timings = dict(source.timings)
@@ -296,7 +308,8 @@ class FeatureRegistration:
             and target.radius != source.radius
         ):
             target = self.describe_at(target, source.radius)
-            timings.update(target.timings)
+            dt = target.timings["describe_target"]
+            timings["describe"] = timings.get("describe", 0.0) + dt
         n_src, n_tgt = source.points.shape[0], target.points.shape[0]
         info: dict[str, Any] = {"n_source": n_src, "n_target": n_tgt}
         if n_src == 0 or n_tgt == 0:
@@ -311,14 +324,25 @@ class FeatureRegistration:
                 info=info,
             )
         t0 = time.perf_counter()
-        corr = match_descriptors(
-            source.descriptors,
-            target.descriptors,
-            tau=self.tau,
-            mutual=self.mutual,
-            src_keypoints=source.keypoints,
-            tgt_keypoints=target.keypoints,
-        )
+        if self.match_from == "target":  # paper 1 eq. 5: each feature of P_k to P_{k+1}
+            back = match_descriptors(
+                target.descriptors,
+                source.descriptors,
+                tau=self.tau,
+                mutual=self.mutual,
+                src_keypoints=target.keypoints,
+                tgt_keypoints=source.keypoints,
+            )
+            corr = Correspondences(back.tgt_idx, back.src_idx, back.distance)
+        else:
+            corr = match_descriptors(
+                source.descriptors,
+                target.descriptors,
+                tau=self.tau,
+                mutual=self.mutual,
+                src_keypoints=source.keypoints,
+                tgt_keypoints=target.keypoints,
+            )
         timings["match"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         grouped = self.grouper.select(
