@@ -67,10 +67,11 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
             "refine": "icp-plane",
             "gate_rotation_deg": 15.0,
             "radius_from": "own",
+            "match_from": "source",
         },
         "HoD-S with relnav's extensions: GCC seeded from every correspondence, SVD, "
-        "point-to-plane ICP refinement, 15° innovation gate, each scan's own support radius "
-        "(the demo's 'extended')",
+        "point-to-plane ICP refinement, 15° innovation gate, each scan's own support radius, "
+        "source-to-target matching (the demo's 'extended')",
     ),
     "relnav-tumbling": MethodPreset(
         NAVIGATOR_METHOD,
