@@ -79,7 +79,7 @@ def test_motion_prior_as_option_is_accepted(base, tmp_path):  # item 3
     assert r.exit_code == 0, r.output
 
 
-@pytest.mark.parametrize("opt", ["gate_rotation_deg=1E0", "max_iter=1E1", "gate_translation=1_000"])
+@pytest.mark.parametrize("opt", ["gate_rotation_deg=1E2", "max_iter=1E1", "gate_translation=1_000"])
 def test_numbers_yaml_leaves_as_strings_are_numbers(base, tmp_path, opt):
     """YAML 1.1 reads ``1E0`` as a string; it used to reach ``np.radians`` (found by the
     property test)."""

@@ -116,8 +116,12 @@ def write_run_outputs(
     extra_outputs: list[str] | None = None,
     state_steps: Any = None,
     state_options: dict[str, Any] | None = None,
+    status: str = "complete",
 ) -> dict[str, Any]:
     """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
+
+    ``status`` goes to ``run.json`` (``complete``, ``interrupted``: Ctrl-C, the frames
+    estimated until then; ``failed``: every frame failed).
 
     With ground truth in ``seq``, ``metrics.json`` holds every metric plus the processing time
     and flag count, and ``errors.png`` the errors over time. Returns the metrics (``{}``
@@ -197,6 +201,7 @@ def write_run_outputs(
         seed=seed,
         timings=timings,
         outputs=[*outputs, *(extra_outputs or []), "run.json"],
+        extra={"status": status},
     )
     write_run_info(out, doc)
     return metrics
@@ -264,6 +269,19 @@ def odometry(
         "--rrd",
         help="Save the live stream to this .rrd (implies --viz; headless default OUT/live.rrd).",
     ),
+    initial_pose: str = typer.Option(
+        None,
+        "--initial-pose",
+        help="Start pose: gt (the ground truth's first pose; default when there is ground "
+        "truth), identity (default otherwise), or a FILE with a 4x4 / 3x4 matrix (16 / 12 "
+        "numbers) or a TUM/KITTI trajectory (its first pose). Printed and kept in run.json.",
+    ),
+    rate: float = typer.Option(
+        None, "--rate", help="Scan rate, Hz, for a folder without times (default 1 Hz)."
+    ),
+    dt: float = typer.Option(
+        None, "--dt", help="Scan spacing, s, for a folder without times (default 1 s)."
+    ),
 ) -> None:
     """Estimate the sensor trajectory; writes estimate.tum, diagnostics.csv and run.json.
 
@@ -274,11 +292,9 @@ def odometry(
     [bold]relnav odometry drive.bag --topic /points --method icp-point --out runs/bag[/],
     [bold]relnav odometry kitti/sequences/00 --method kiss-icp --format kitti --out runs/00[/]
     """
-    from rich.table import Table
-
     from relnav.errors import ConfigError, InputError
+    from relnav.io.outputs import RunFolder, output_error
     from relnav.io.sources import open_sequence
-    from relnav.odometry import run_sequence
     from relnav.odometry.options import check_max_frames
 
     max_frames = check_max_frames(max_frames)
@@ -289,12 +305,22 @@ def odometry(
             f"--motion-prior {motion_prior} and -O motion_prior={prior} disagree; give one"
         )
     motion_prior = motion_prior or prior or "constant_velocity"
-    initial_pose = opts.pop("initial_pose", "gt")
+    pose_option = opts.pop("initial_pose", None)
+    if initial_pose is not None and pose_option is not None:
+        raise ConfigError("--initial-pose and -O initial_pose both given; give one")
+    spacing = time_spacing(rate, dt)
     name, opts, preset = prepare_method(method, opts)
     seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
     if len(seq) == 0:
         raise InputError(f"{seq_dir}: no scan files to run odometry on")
     n = len(seq) if max_frames is None else min(len(seq), max_frames)
+    apply_time_spacing(seq, spacing)
+    if initial_pose is not None:
+        start, start_text = start_pose(initial_pose, seq, from_file=True)
+    else:
+        start, start_text = start_pose(pose_option, seq)
+    console.print(f"start pose: {start_text}", highlight=False)
+    warn_units(seq)
     live = None
     if viz or rrd is not None:
         from relnav.eval.rerun_export import LiveViewer
@@ -305,7 +331,7 @@ def odometry(
             gt_poses=seq.gt_poses,
             fallback_rrd=Path(out) / "live.rrd",
         )
-    from relnav.navigation.state import StateRecord, check_state_options
+    from relnav.navigation.state import check_state_options
 
     if state is None:
         state = name == "relnav" and n <= STATE_MAX_FRAMES
@@ -321,6 +347,54 @@ def odometry(
             f"[yellow]{n} frames: the full relative state is skipped to keep memory flat "
             "(--state writes it)[/]"
         )
+    with RunFolder(out, protect=getattr(seq, "source_files", [])) as folder:
+        try:
+            summary = _run_into(
+                folder,
+                seq,
+                name,
+                opts,
+                preset=preset,
+                start=start,
+                n=n,
+                live=live,
+                records=records,
+                state_opts=state_opts,
+                motion_prior=motion_prior,
+                max_frames=max_frames,
+                strict=strict,
+                fmt=fmt,
+            )
+        except OSError as e:
+            raise output_error(e, out) from None
+        _report(Path(out), folder, summary)  # under the lock: the folder is finished
+
+
+def _run_into(
+    folder: Any,
+    seq: Any,
+    name: str,
+    opts: dict[str, Any],
+    *,
+    preset: str | None,
+    start: Any,
+    n: int,
+    live: Any,
+    records: list[Any] | None,
+    state_opts: dict[str, Any],
+    motion_prior: Any,
+    max_frames: int | None,
+    strict: bool,
+    fmt: PoseFormat,
+) -> dict[str, Any]:
+    """The run and its outputs, in ``folder`` (held by :class:`relnav.io.outputs.RunFolder`);
+    returns ``status``, ``interrupted`` and ``failed`` for :func:`_report`."""
+    from rich.table import Table
+
+    from relnav.navigation.state import StateRecord
+    from relnav.odometry import run_sequence
+
+    out = folder.folder
     t0 = time.perf_counter()
     with progress_bar() as bar:
         task = bar.add_task(preset or name, total=n)
@@ -335,17 +409,20 @@ def odometry(
         run = run_sequence(
             seq,
             name,
-            initial_pose=initial_pose,
-            motion_prior=motion_prior,  # type: ignore[arg-type]
+            initial_pose=start,
+            motion_prior=motion_prior,
             max_frames=max_frames,
             progress=step,
             out=out,
             keep_steps=False,  # memory stays flat; the state keeps its compact records
             strict=strict,
+            on_interrupt="stop",  # Ctrl-C: the frames estimated are written, run.json says so
             **opts,
         )
     wall = time.perf_counter() - t0
-    out = Path(out)
+    interrupted = run.options.get("interrupted")
+    all_failed = _all_failed(run)
+    status = "interrupted" if interrupted else ("failed" if all_failed else "complete")
     if live is not None:
         live.close()
         if live.path is not None:
@@ -368,7 +445,10 @@ def odometry(
         extra_outputs=live_file,
         state_steps=records if records is not None else [],
         state_options=state_opts,
+        status=status,
     )
+    if interrupted or all_failed:
+        return {"status": status, "interrupted": interrupted, "failed": all_failed}
     table = Table(title=f"odometry — {preset or name}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -398,8 +478,154 @@ def odometry(
         console.print(
             f"[yellow]evaluation needs at least two frames ({n} estimated): metrics skipped[/]"
         )
-    written = sorted(p.name for p in out.iterdir() if p.is_file())
-    console.print(f"wrote {out}/: {', '.join(written)}", highlight=False)
+    return {"status": status, "interrupted": None, "failed": None}
+
+
+def _all_failed(run: Any) -> str | None:
+    """The first failure's reason when every frame failed (none registered), else ``None``."""
+    counts = run.status_counts()
+    n_failed = counts.get("failed", 0)
+    if not n_failed or n_failed + counts.get("first", 0) != sum(counts.values()):
+        return None
+    for row in run.diagnostics():
+        if row.get("status") == "failed" and row.get("message"):
+            return str(row["message"])
+    return "no reason recorded"
+
+
+def _report(out: Path, folder: Any, summary: dict[str, Any]) -> None:
+    """Finish the folder (drop the previous run's other outputs, the .incomplete marker) and
+    print what was written; one line and a non-zero exit after Ctrl-C or when every frame
+    failed."""
+    from relnav.errors import EstimationError
+    from relnav.io.runinfo import read_run_info
+
+    written = list((read_run_info(out) or {}).get("outputs", []))
+    removed = folder.finish(written)
+    if removed:
+        console.print(
+            f"removed the previous run's {', '.join(sorted(removed))} (not written by this run)",
+            highlight=False,
+        )
+    if summary["interrupted"]:
+        k, n = summary["interrupted"]["at_frame"], summary["interrupted"]["of"]
+        console.print(
+            f"[yellow]interrupted at frame {k} of {n}: the {k} frames estimated are in {out}/ "
+            "(run.json status: interrupted)[/]",
+            highlight=False,
+        )
+        raise typer.Exit(130)
+    if summary["failed"]:
+        raise EstimationError(
+            f"every frame failed (first: {summary['failed']}); diagnostics in "
+            f"{out}/diagnostics.csv, run.json status: failed"
+        )
+    console.print(f"wrote {out}/: {', '.join(sorted(written))}", highlight=False)
+
+
+def time_spacing(rate: float | None, dt: float | None) -> float | None:
+    """Scan spacing (s) from ``--rate`` (Hz) or ``--dt`` (s); ConfigError for both, or a value
+    that is not positive and finite."""
+    import math
+
+    from relnav.errors import ConfigError
+
+    if rate is not None and dt is not None:
+        raise ConfigError("--rate and --dt both given; give one")
+    for flag, v in (("--rate", rate), ("--dt", dt)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"{flag} must be a positive number, got {v}")
+    if rate is not None:
+        return 1.0 / rate
+    return dt
+
+
+def apply_time_spacing(seq: Any, spacing: float | None) -> None:
+    """Set a folder's scan spacing, or warn that 1 s is assumed when it has no times."""
+    from relnav.errors import ConfigError
+
+    assumed = bool(getattr(seq, "times_assumed", False))
+    if spacing is not None:
+        if not assumed:
+            raise ConfigError(
+                "--rate/--dt are for folders without times; this input has its own scan times"
+            )
+        seq.set_time_spacing(spacing)
+    elif assumed:
+        console.print(
+            "[yellow]no scan times (no timestamps.txt/times.txt): assuming 1 s between scans; "
+            "--rate HZ or --dt S sets the spacing[/]",
+            highlight=False,
+        )
+
+
+def start_pose(value: Any, seq: Any, *, from_file: bool = False) -> tuple[Any, str]:
+    """The start pose given to the run (``"gt"``, ``None`` = identity, or a 4x4) and the line
+    printed about it. ``value``: ``None`` (gt when there is ground truth, else identity),
+    ``"gt"``, ``"identity"``, what ``-O initial_pose`` parsed to, or (``from_file``, the
+    ``--initial-pose`` option) a file name."""
+    import numpy as np
+
+    from relnav.errors import ConfigError
+    from relnav.odometry.options import parse_initial_pose
+
+    has_gt = getattr(seq, "gt_poses", None) is not None
+    if value is None:
+        value = "gt" if has_gt else "identity"
+    if from_file and isinstance(value, str) and value.strip().lower() not in ("gt", "identity"):
+        T = parse_initial_pose(_pose_file(Path(value)))
+        return T, f"from {value} (--initial-pose)"
+    parsed = parse_initial_pose(value)
+    if isinstance(parsed, str):
+        if not has_gt:
+            raise ConfigError("--initial-pose gt: this input has no ground truth")
+        return parsed, "the ground truth's first pose (--initial-pose gt)"
+    if parsed is None:
+        why = "" if has_gt else " (no ground truth; --initial-pose FILE sets one)"
+        return None, f"identity{why}"
+    return np.asarray(parsed), "given by -O initial_pose"
+
+
+def _pose_file(p: Path) -> Any:
+    """16 or 12 numbers (a 4x4 or 3x4 matrix, row-major) or a trajectory's first pose."""
+    import numpy as np
+
+    from relnav.errors import ConfigError, InputError
+    from relnav.io.text import read_text_file
+    from relnav.io.trajectories import read_trajectory
+
+    if not p.is_file():
+        raise ConfigError(
+            f"--initial-pose {p}: not gt, identity nor a file (a 4x4 matrix or a trajectory)"
+        )
+    tokens = read_text_file(p, what="pose").replace(",", " ").split()
+    tokens = [t for t in tokens if not t.startswith("#")]
+    if len(tokens) in (12, 16):
+        try:
+            return [float(t) for t in tokens]
+        except ValueError:
+            pass
+    try:
+        _, poses, _ = read_trajectory(p)
+    except InputError as e:
+        raise ConfigError(f"--initial-pose {p}: neither a matrix nor a trajectory ({e})") from None
+    if not len(poses):
+        raise ConfigError(f"--initial-pose {p}: the trajectory is empty")
+    return np.asarray(poses[0])
+
+
+def warn_units(seq: Any) -> None:
+    """Print a units hint when the first scan extends far beyond the scene (see
+    :func:`relnav.io.sources.units_warning`)."""
+    from relnav.errors import InputError
+    from relnav.io.sources import units_warning
+
+    try:
+        scan = seq[0]
+    except InputError:
+        return  # the run flags it
+    if (msg := units_warning(seq, scan.points)) is not None:
+        console.print(f"[yellow]warning: {msg}[/]", highlight=False)
 
 
 def register(app: typer.Typer) -> None:

@@ -237,6 +237,7 @@ class ScanSequence:
             _check_increasing(t, lay.timestamps)
             self._times = t
         self._times_from_file = self._times is not None
+        self._times_assumed = False
 
     # --- metadata --------------------------------------------------------------------------
 
@@ -269,6 +270,7 @@ class ScanSequence:
         if self._times is None:
             n = len(self._files)
             times = np.arange(n, dtype=np.float64)
+            self._times_assumed = True
             if self._layout.gt.is_file():
                 try:
                     t, _ = read_tum(self._layout.gt)
@@ -277,10 +279,23 @@ class ScanSequence:
                 else:
                     if t.shape[0] == n:
                         _check_increasing(t, self._layout.gt)
-                        times = t
+                        times, self._times_assumed = t, False
             self._times = times
             self._times_from_file = False
         return self._times
+
+    @property
+    def times_assumed(self) -> bool:
+        """True when no file gives the scan times (neither ``timestamps.txt`` nor the ground
+        truth): they are ``0, 1, 2, …`` s, or what :meth:`set_time_spacing` set."""
+        self._scan_times()
+        return self._times_assumed
+
+    def set_time_spacing(self, dt: float) -> None:
+        """Scan times ``0, dt, 2·dt, …`` (seconds) for a sequence without times of its own."""
+        if not self.times_assumed:
+            raise InputError(f"{self.folder}: the scans have times of their own (--dt/--rate)")
+        self._times = np.arange(len(self._files), dtype=np.float64) * float(dt)
 
     @property
     def gt_poses(self) -> np.ndarray | None:

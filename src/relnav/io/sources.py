@@ -33,7 +33,14 @@ from relnav.io.text import read_text_file
 from relnav.io.trajectories import read_kitti
 from relnav.scan import Scan
 
-__all__ = ["FileSequence", "content_hash", "open_sequence", "read_kitti_calib_tr"]
+__all__ = [
+    "UNITS_FACTOR",
+    "FileSequence",
+    "content_hash",
+    "open_sequence",
+    "read_kitti_calib_tr",
+    "units_warning",
+]
 
 logger = logging.getLogger("relnav.io")
 
@@ -78,6 +85,19 @@ class FileSequence:
         self._kind = kind
         self._folder = folder if folder is not None else (self._files[0].parent if n else Path())
         self._extra = list(extra_sources)
+        self._times_assumed = times is None
+
+    @property
+    def times_assumed(self) -> bool:
+        """True when no file gave the scan times: they are ``0, 1, 2, …`` s (or what
+        :meth:`set_time_spacing` set)."""
+        return self._times_assumed
+
+    def set_time_spacing(self, dt: float) -> None:
+        """Scan times ``0, dt, 2·dt, …`` (seconds) for a folder without a times file."""
+        if not self._times_assumed:
+            raise InputError(f"{self._folder}: the scans have times of their own (--dt/--rate)")
+        self._times = np.arange(len(self._files), dtype=np.float64) * float(dt)
 
     @property
     def folder(self) -> Path:
@@ -291,3 +311,56 @@ def content_hash(paths: Sequence[Path], root: Path | None = None) -> str:
             for chunk in iter(lambda: f.read(1 << 20), b""):
                 h.update(chunk)
     return "sha256:" + h.hexdigest()
+
+
+UNITS_FACTOR = 1000.0
+"""A scan extending this many times beyond the sensor's range or the scene's size is taken as
+written in other units (millimetres instead of metres)."""
+
+
+def _scene_lengths(seq: Any) -> list[tuple[float, str]]:
+    """Lengths (m) a scan of ``seq`` should stay within: the sensor's range, the target's size
+    and the ground truth's farthest sensor-to-origin distance, where known."""
+    out: list[tuple[float, str]] = []
+    meta = getattr(seq, "sensor_meta", None) or {}
+    try:
+        r = float(meta.get("max_range", np.inf))
+    except (TypeError, ValueError):
+        r = np.inf
+    if np.isfinite(r) and r > 0:
+        out.append((r, "the sensor's range"))
+    try:
+        sc = getattr(seq, "scenario", None) or {}
+        size = float((sc.get("target") or {}).get("scale_to") or 0.0)
+    except (AttributeError, TypeError, ValueError, InputError):
+        size = 0.0
+    if np.isfinite(size) and size > 0:
+        out.append((size, "the target's size"))
+    try:
+        gt = getattr(seq, "gt_poses", None)
+    except InputError:
+        gt = None
+    if gt is not None and len(gt):
+        d = float(np.max(np.linalg.norm(np.asarray(gt)[:, :3, 3], axis=1)))
+        if np.isfinite(d) and d > 0:
+            out.append((d, "the ground truth's largest distance to the target"))
+    return out
+
+
+def units_warning(seq: Any, points: np.ndarray) -> str | None:
+    """A warning when ``points`` (a scan of ``seq``, ``(N, 3)`` m) extend
+    :data:`UNITS_FACTOR` times or more beyond every length the sequence knows (sensor range,
+    target size, ground-truth distance): the scans are likely in millimetres. ``None``
+    otherwise, or when the sequence knows no length."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    lengths = _scene_lengths(seq)
+    if not len(pts) or not lengths:
+        return None
+    extent = float(np.max(np.linalg.norm(pts, axis=1)))
+    ref, what = max(lengths)
+    if extent < UNITS_FACTOR * ref:
+        return None
+    return (
+        f"the first scan reaches {extent:.4g} m, {extent / ref:.0f}x {what} ({ref:.4g} m): "
+        "are the scans in millimetres? relnav reads coordinates in metres"
+    )
