@@ -43,8 +43,15 @@ def save_png(fig: Figure, path: str | Path, dpi: int, *, what: str = "plots") ->
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise InputError(f"{out}: {what} are written as PNG; use a .png file name")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi)
+    from relnav.atomic import atomic_open
+
+    try:  # atomically: a full disk leaves no truncated PNG, and one line, not a traceback
+        with atomic_open(out, "wb") as f:
+            fig.savefig(f, dpi=dpi, format="png")
+    except OSError as e:
+        from relnav.io.outputs import output_error
+
+        raise output_error(e, out) from None
     log.debug("wrote %s", out)
     return out
 
