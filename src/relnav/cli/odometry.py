@@ -304,12 +304,13 @@ def odometry(
         raise ConfigError(
             f"--motion-prior {motion_prior} and -O motion_prior={prior} disagree; give one"
         )
-    motion_prior = motion_prior or prior or "constant_velocity"
     pose_option = opts.pop("initial_pose", None)
     if initial_pose is not None and pose_option is not None:
         raise ConfigError("--initial-pose and -O initial_pose both given; give one")
     spacing = time_spacing(rate, dt)
     name, opts, preset = prepare_method(method, opts)
+    preset_prior = opts.pop("motion_prior", None)  # a preset's own (paper1-icp-point: identity)
+    motion_prior = motion_prior or prior or preset_prior or "constant_velocity"
     seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
     if len(seq) == 0:
         raise InputError(f"{seq_dir}: no scan files to run odometry on")
