@@ -177,3 +177,26 @@ def test_attitude_input_holds_the_navigator_under_jitter(jittered):
     assert np.sqrt(np.mean(ea**2)) < 0.5 * np.sqrt(np.mean(ep**2))
     assert np.max(ea) < 1.0
     assert aided.options["finalize"]["attitude_input"]["sigma_deg"] == 0.01
+
+
+def test_jitter_is_learned_from_rotation_innovations_beyond_the_scan_margin(rng):
+    from relnav.geometry.lie import exp_se3
+    from relnav.navigation.motion import ConstantVelocityFilter
+
+    def learn(sigma_deg, scan_sigma_deg):
+        f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 1e-3), np.full(6, 1e-5))
+        f.jitter_rate, f.jitter_max = 0.2, np.radians(5.0) ** 2
+        H = np.diag([1e8] * 3 + [1.0 / np.radians(scan_sigma_deg) ** 2] * 3)
+        for k in range(1, 200):
+            T_pred, _ = f.predict(float(k))
+            d = rng.normal(0.0, np.radians(sigma_deg), 3)  # the registered pose: jittered
+            f.update(T_pred @ exp_se3(np.r_[0.0, 0.0, 0.0, d]), H)
+        return np.degrees(np.sqrt(f.jitter_var))
+
+    assert 0.6 < learn(1.0, 0.01) < 1.4  # white 1° per axis, a precise scan: learned
+    # corrections the scan's own noise explains (within its variance ×9) are not jitter
+    assert learn(1.0, 1.0) < 0.3
+    assert learn(0.0, 0.01) < 0.05
+    f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 1e-3), np.full(6, 1e-4))
+    f.adapt_jitter(np.ones(3))  # off by default (jitter_rate 0): a plain filter is unchanged
+    assert f.jitter_var == 0.0

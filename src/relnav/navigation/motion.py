@@ -60,6 +60,11 @@ class ConstantVelocityFilter:
         self._F: np.ndarray | None = None
         self._clone: tuple[np.ndarray, np.ndarray] | None = None
         self._raw_pred: tuple[np.ndarray, np.ndarray] | None = None
+        self.jitter_var = 0.0
+        self.jitter_rate = 0.0
+        self.jitter_max = 0.0
+        self.jitter_scan_margin = 9.0
+        self._model_rr = 0.0
         self.step_covariance: np.ndarray | None = None
 
     def adapt(self, chi2: float, dof: int = 6, rate: float = 0.1, max_scale: float = 100.0) -> None:
@@ -71,6 +76,28 @@ class ConstantVelocityFilter:
         r = float(chi2) / dof
         self.nis_ema = r if self.nis_ema is None else (1 - rate) * self.nis_ema + rate * r
         self.q_scale = float(np.clip(self.nis_ema, 1.0, max_scale))
+
+    def adapt_jitter(self, innovation_r: np.ndarray, scan_rr: float = 0.0) -> None:
+        """Learn the white attitude noise of the pose (rad² per axis per step) from the
+        rotation part of an innovation (body frame, rad).
+
+        **[interpretation]** A chaser's attitude jitters (limit cycles, thruster firings):
+        white rotation noise of the pose that the constant-velocity model would otherwise
+        read as changes of the rotation rate. Its variance is the EMA (rate
+        ``jitter_rate``) of the innovation's per-axis square in excess of the model's own
+        predicted rotation variance and ``jitter_scan_margin`` times the scan's own
+        (``scan_rr``, rad² per axis: a registration's information under-states its error, so
+        only corrections far beyond it are taken for jitter), at most ``jitter_max``; it is
+        added to the predicted pose's rotation block only, so the velocity does not absorb
+        it. Off at ``jitter_rate = 0``.
+        """
+        if self.jitter_rate <= 0:
+            return
+        y = np.asarray(innovation_r, dtype=float)
+        floor = self._model_rr + self.jitter_scan_margin * max(scan_rr, 0.0)
+        excess = max(float(y @ y) / 3.0 - floor, 0.0)
+        a = self.jitter_rate
+        self.jitter_var = min((1 - a) * self.jitter_var + a * excess, self.jitter_max)
 
     def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Predicted pose and its body-frame covariance ``P_pp`` (6×6) at time ``t``."""
@@ -86,6 +113,8 @@ class ConstantVelocityFilter:
         Q[6:, 6:] = np.diag(sa2)
         Q[:6, :6] = np.diag(sa2 * dt**2) / 3.0
         P = F @ self.P @ F.T + Q
+        self._model_rr = float(np.mean(np.diag(P)[3:6]))  # before the attitude jitter
+        P[3:6, 3:6] += self.jitter_var * np.eye(3)
         # stochastic clone of the previous pose error: its covariance and its cross-covariance
         # with the predicted state, for the covariance of the step (see step_covariance)
         self._clone = (self.P[:6, :6].copy(), F @ self.P[:, :6])
@@ -146,6 +175,13 @@ class ConstantVelocityFilter:
         H = Ad.T @ H_left @ Ad
         Ppp = P[:6, :6]
         y = log_se3(invert(T_pred) @ T_star)
+        if self.jitter_rate > 0:
+            T0 = self._raw_pred[0] if self._raw_pred else T_pred
+            try:
+                scan_rr = float(np.mean(np.diag(np.linalg.inv(H))[3:]))
+            except np.linalg.LinAlgError:
+                scan_rr = np.inf
+            self.adapt_jitter(log_se3(invert(T0) @ T_star)[3:], scan_rr)
         try:
             self.velocity = self.velocity + P[6:, :6] @ np.linalg.solve(Ppp, y)
             G = H @ np.linalg.inv(Ppp @ H + np.eye(6))

@@ -476,6 +476,9 @@ class Navigator:
             np.array([st0] * 3 + [sr0] * 3),
             np.array([sa_t] * 3 + [sa_r] * 3),
         )
+        self.motion.jitter_rate = c.jitter_rate
+        self.motion.jitter_max = math.radians(c.jitter_max_deg) ** 2
+        self.motion.jitter_scan_margin = c.jitter_scan_margin
         self._rescaled = False
         self._f0 = self.n_frames
         self._first_sigma = (st0, sr0)
@@ -550,6 +553,7 @@ class Navigator:
             info["symmetry_shift_sigma"] = float(sym @ Lam @ xi) / math.sqrt(q) if q > 0 else 0.0
         info["information"] = H
         info["prior_information"] = Lam
+        info["prediction"] = T_pred
         info.update(
             iterations=fit["iterations"],
             overlap=fit["overlap"],
@@ -565,6 +569,7 @@ class Navigator:
             repeat_fraction=fit["repeat_fraction"],
             repeated_points=fit["repeated"],
             same_rays=self.repeats.ray_fraction,
+            jitter_sigma_deg=math.degrees(math.sqrt(self.motion.jitter_var)),
         )
         status = "ok"
         message = ""

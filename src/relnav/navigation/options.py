@@ -124,6 +124,11 @@ class NavigatorConfig:
         (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.
     adaptive_noise : bool
         Scale the motion model's process noise by its recent normalised corrections.
+    jitter_rate, jitter_max_deg, jitter_scan_margin : float
+        The chaser's attitude jitter learned from the rotation innovations (EMA rate; 0 = off),
+        its largest 1σ per axis per step (degrees) and how many times the scan's own rotation
+        variance an innovation must exceed to count: white rotation noise of the pose, not of
+        the velocity (:meth:`~relnav.navigation.motion.ConstantVelocityFilter.adapt_jitter`).
     min_degeneracy : float
         Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
         information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
@@ -497,6 +502,9 @@ class NavigatorConfig:
     chi2_gate: float = 100.0
     recover_rms_ratio: float = 1.5
     adaptive_noise: bool = True
+    jitter_rate: float = 0.2
+    jitter_max_deg: float = 5.0
+    jitter_scan_margin: float = 9.0
     smooth_lag: int = 20
     bootstrap_frames: int = 0
     init_window: int = 10
