@@ -89,3 +89,23 @@ def test_odometry_runs_the_navigator_by_default(tmp_path):
         app, ["odometry", str(seq), "--out", str(bad), "--no-state", "-S", "drift=map"]
     )
     assert res.exit_code != 0 and "needs the full state" in str(res.exception)
+
+
+def test_demo_side_by_side_equals_one_after_the_other(tmp_path):
+    """--jobs 2 runs the methods in worker processes: the same estimates and metrics as --jobs 1
+    (only the measured times differ)."""
+    outs = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"j{jobs}"
+        args = ["demo", "--out", str(out), "--frames", "4", "-m", "icp-point", "-m", "paper1"]
+        res = CliRunner().invoke(app, [*args, "--jobs", str(jobs)])
+        assert res.exit_code == 0, res.output
+        outs[jobs] = json.loads((out / "metrics.json").read_text())["methods"]
+    for m in ("icp-point", "paper1"):
+        a, b = outs[1][m], outs[2][m]
+        timing = {k for k in a if k.startswith("time_")}
+        assert {k: v for k, v in a.items() if k not in timing} == {
+            k: v for k, v in b.items() if k not in timing
+        }, m
+        est = [(tmp_path / f"j{j}" / "runs" / m / "estimate.tum").read_text() for j in (1, 2)]
+        assert est[0] == est[1]

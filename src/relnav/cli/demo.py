@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, NamedTuple
 
+import numpy as np
 import typer
 
 from relnav.cli._common import console, progress_bar
@@ -57,6 +60,102 @@ def run_folder_name(method: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", method).strip("_") or "method"
 
 
+def default_jobs() -> int:
+    """Processes for the demo's methods: the usable cores, at most 2 (the methods are few and
+    each one's numba compilation is the cold run's main cost)."""
+    import os
+
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        n = os.cpu_count() or 1
+    return max(1, min(2, n))
+
+
+class _Trajectory(NamedTuple):
+    """What the demo keeps of a method's run for the joint figures (a run's steps stay in its
+    worker): times (N,) s, poses (N, 4, 4) target frame."""
+
+    timestamps: np.ndarray
+    poses: np.ndarray
+
+
+def _run_method(
+    seq_dir: Path,
+    m: str,
+    name: str,
+    options: dict[str, Any],
+    preset: str | None,
+    folder: Path,
+    seed: int,
+    progress: Callable[[], None] | None = None,
+) -> tuple[dict[str, Any], _Trajectory]:
+    """Run one method on the simulated sequence and write its run folder; returns its metrics
+    and trajectory. Called in the CLI process or in a worker (:func:`_run_side_by_side`)."""
+    from relnav.cli.odometry import write_run_outputs
+    from relnav.io.sequences import ScanSequence
+    from relnav.odometry import run_sequence
+
+    seq = ScanSequence(seq_dir)
+    tick = (lambda i, s: progress()) if progress is not None else None
+    run = run_sequence(seq, name, progress=tick, **options)
+    metrics = write_run_outputs(folder, run, seq, command="demo", preset=preset, seed=seed)
+    return metrics, _Trajectory(np.asarray(run.timestamps), np.asarray(run.poses))
+
+
+_QUEUE: Any = None
+
+
+def _worker_init(queue: Any) -> None:
+    """A worker ignores Ctrl-C (the CLI process ends the pool) and reports frames to ``queue``."""
+    import signal
+
+    global _QUEUE
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _QUEUE = queue
+
+
+def _worker_run(*job: Any) -> tuple[dict[str, Any], _Trajectory]:
+    """:func:`_run_method` in a worker, each frame put on the progress queue."""
+    m = job[1]
+    return _run_method(*job, progress=lambda: _QUEUE.put(m))
+
+
+def _run_side_by_side(
+    jobs: list[tuple], n: int, bar: Any, tasks: dict[str, Any]
+) -> dict[str, tuple[dict[str, Any], _Trajectory]]:
+    """The methods' runs in ``n`` spawned processes (each compiles its own kernels, the cold
+    run's main cost; results are identical to a sequential run), the progress bars fed from a
+    queue. Ctrl-C ends the workers."""
+    import multiprocessing as mp
+    import queue as queue_mod
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    pool = ctx.Pool(n, initializer=_worker_init, initargs=(q,))
+    try:
+        pending = {j[1]: pool.apply_async(_worker_run, j) for j in jobs}
+        results: dict[str, tuple[dict[str, Any], _Trajectory]] = {}
+        while len(results) < len(pending):
+            try:
+                bar.advance(tasks[q.get(timeout=0.1)])
+            except queue_mod.Empty:
+                pass
+            for m, r in pending.items():
+                if m not in results and r.ready():
+                    results[m] = r.get()  # re-raises a worker's error here
+        while True:  # the last frames' ticks
+            try:
+                bar.advance(tasks[q.get_nowait()])
+            except queue_mod.Empty:
+                break
+        pool.close()
+        return results
+    finally:
+        pool.terminate()
+        pool.join()
+
+
 def demo(
     out: Path = typer.Option(Path("relnav-demo"), "--out", "-o", help="Output folder."),
     preset: str = typer.Option(DEMO_PRESET, "--preset", help="Scenario preset to simulate."),
@@ -71,6 +170,14 @@ def demo(
         help="Methods or presets to compare (`relnav methods`); default: relnav, paper1, "
         "icp-point, and kiss-icp when [baselines] is installed.",
     ),
+    jobs: int = typer.Option(
+        default_jobs(),
+        "--jobs",
+        "-j",
+        min=1,
+        help="Methods run side by side in this many processes (default: up to 2 cores; "
+        "1: one after the other). Results are the same; time_ms is each method's own.",
+    ),
 ) -> None:
     """Run the whole chain on a built-in scenario (procedural target, ~60 frames).
 
@@ -84,12 +191,10 @@ def demo(
     from rich.table import Table
 
     from relnav.cli.evaluate import json_safe
-    from relnav.cli.odometry import write_run_outputs
     from relnav.eval.metrics import match_trajectories
     from relnav.eval.plots import plot_errors, plot_trajectories
     from relnav.io.runinfo import run_info, write_run_info
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
     from relnav.odometry.presets import resolve_method
     from relnav.sim.presets import get_preset
     from relnav.sim.scenario import simulate
@@ -107,22 +212,19 @@ def demo(
         simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
         timings["simulate_s"] = time.perf_counter() - t0
         seq = ScanSequence(seq_dir)
-        runs = {}
-        for m in method:
-            name, options, _ = resolved[m]
-            task = bar.add_task(m, total=len(seq))
-            runs[m] = run_sequence(
-                seq, name, progress=lambda i, s, t=task: bar.advance(t), **options
-            )
-
-    metrics: dict[str, dict] = {}
-    folders: dict[str, str] = {}
-    for m, run in runs.items():
-        folder = out / "runs" / run_folder_name(m)
-        metrics[m] = write_run_outputs(
-            folder, run, seq, command="demo", preset=resolved[m][2], seed=seed
-        )
-        folders[m] = str(folder.relative_to(out))
+        tasks = {m: bar.add_task(m, total=len(seq)) for m in method}
+        jobs_ = [
+            (seq_dir, m, *resolved[m], out / "runs" / run_folder_name(m), seed) for m in method
+        ]
+        if jobs > 1 and len(method) > 1:
+            results = _run_side_by_side(jobs_, min(jobs, len(method)), bar, tasks)
+        else:
+            results = {
+                j[1]: _run_method(*j, progress=lambda t=tasks[j[1]]: bar.advance(t)) for j in jobs_
+            }
+    runs = {m: results[m][1] for m in method}
+    metrics: dict[str, dict] = {m: results[m][0] for m in method}
+    folders = {m: f"runs/{run_folder_name(m)}" for m in method}
     (out / "metrics.json").write_text(
         json.dumps(
             {

@@ -111,21 +111,22 @@ def _quickselect(
             break
 
 
-@njit(cache=True)
 def _kd_build(
     P: np.ndarray, leaf_size: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Implicit balanced KD-tree: node ``k`` covers ``[s, e)`` of the permuted points, children
     ``2k+1`` (``[s, m)``) and ``2k+2`` (``[m, e)``) with ``m = (s + e) // 2``; split on the axis
     of largest spread at the median. Returns ``(points_permuted, perm, split_dim, split_val)``
-    (``split_dim = -1`` marks leaves)."""
+    (``split_dim = -1`` marks leaves).
+
+    Called from Python (not compiled): ``select`` then reaches the kernel as a run-time bool,
+    so both builds share one compiled :func:`_kd_build_impl`."""
     return _kd_build_impl(P, leaf_size, False)
 
 
-@njit(cache=True)
 def _kd_build_select(
     P: np.ndarray, leaf_size: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
     is split by a quickselect of its median instead of a sort.
 
