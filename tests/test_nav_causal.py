@@ -200,3 +200,27 @@ def test_jitter_is_learned_from_rotation_innovations_beyond_the_scan_margin(rng)
     f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 1e-3), np.full(6, 1e-4))
     f.adapt_jitter(np.ones(3))  # off by default (jitter_rate 0): a plain filter is unchanged
     assert f.jitter_var == 0.0
+
+
+def test_cli_writes_the_causal_estimate_and_compare_uses_it_by_default(short_orbit, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+
+    runner = CliRunner()
+    out = tmp_path / "nav"
+    res = runner.invoke(app, ["odometry", str(short_orbit.folder), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert (out / "estimate_causal.tum").is_file()
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["causal"]["ape_trans_rmse"] != metrics["ape_trans_rmse"]
+    docs = {}
+    for flag in ("--causal", "--smoothed"):
+        doc = tmp_path / f"cmp{flag}.json"
+        res = runner.invoke(app, ["compare", str(out), flag, "--json", str(doc)])
+        assert res.exit_code == 0, res.output
+        docs[flag] = json.loads(doc.read_text())["runs"]["relnav"]
+    assert docs["--causal"]["ape_trans_rmse"] == pytest.approx(metrics["causal"]["ape_trans_rmse"])
+    assert docs["--smoothed"]["ape_trans_rmse"] == pytest.approx(metrics["ape_trans_rmse"])

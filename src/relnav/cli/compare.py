@@ -18,10 +18,13 @@ ERRORS = ("ape_trans", "ape_rot", "rpe_trans", "rpe_rot")
 _UNITS = {"ape_trans": "m", "ape_rot": "deg", "rpe_trans": "m", "rpe_rot": "deg"}
 
 
-def _estimate_file(run: Path) -> Path:
+def _estimate_file(run: Path, smoothed: bool = False) -> Path:
+    """The run's trajectory: its causal one (``estimate_causal.tum``, the poses a real-time loop
+    had, written by methods with a smoother) unless ``smoothed``, else ``estimate.tum``."""
     if run.is_file():
         return run
-    for name in ("estimate.tum", "estimate_kitti.txt"):
+    names = ("estimate.tum", "estimate_kitti.txt")
+    for name in names if smoothed else ("estimate_causal.tum", *names):
         if (run / name).is_file():
             return run / name
     raise InputError(f"{run}: no estimate.tum (give a run folder or a TUM/KITTI file)")
@@ -142,6 +145,13 @@ def compare(
     plot_dir: Path | None = typer.Option(
         None, "--plot-dir", help="Write compare.png and trajectories.png into this folder."
     ),
+    smoothed: bool = typer.Option(
+        False,
+        "--smoothed/--causal",
+        help="Runs with a smoother (relnav): compare its smoothed trajectory (estimate.tum, "
+        "which used later frames) instead of its causal one (estimate_causal.tum, the default: "
+        "like every causal peer).",
+    ),
 ) -> None:
     """Compare several runs on the same ground truth: an evo_res-style table and plot.
 
@@ -182,7 +192,9 @@ def compare(
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     estimates: dict[str, np.ndarray] = {}
     for name, r in names.items():
-        f = _estimate_file(r)
+        f = _estimate_file(r, smoothed)
+        if smoothed and r.is_dir() and (r / "estimate_causal.tum").is_file():
+            console.print(f"{name}: smoothed trajectory (it used later frames; --causal: not)")
         t_e, P_e, _ = read_poses(f, "estimated")
         if t_e is None:
             if len(P_e) != len(P_gt):
