@@ -142,3 +142,42 @@ def test_subprocess_bad_yaml_one_line_error(tmp_path):
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, p.stderr
     assert "error" in lines[0] and "frames" in lines[0] and "colour" in lines[0]
+
+
+def test_simulate_help_lists_every_preset():
+    from relnav.sim.presets import available_presets
+
+    r = CliRunner(env={"COLUMNS": "200"}).invoke(app, ["simulate", "--help"])
+    assert r.exit_code == 0, r.output
+    for name in available_presets():
+        assert name in r.output, name
+
+
+def test_param_numbers_in_exponent_form_are_numbers(tmp_path):
+    """YAML 1.1 reads 1e1 as a string: --param values still reach the scenario as numbers."""
+    from relnav.cli.simulate import build_scenario
+    from relnav.sim.scenario import _parse_value
+
+    assert _parse_value("1e1") == 10.0 and isinstance(_parse_value("1e1"), float)
+    assert _parse_value("1_000") == 1000 and _parse_value("2") == 2
+    assert _parse_value("y") == "y" and _parse_value("[1, 2e0]") == [1, 2.0]
+    sc = build_scenario("sim-eoi", max_frames=2, params={"trajectory.params.semi_minor": "1e1"})
+    assert sc.trajectory.params["semi_minor"] == 10.0
+    sc = build_scenario("li-rotating", max_frames=2, params={"distance": "2.4e0"})
+    assert sc.model_dump()["frames"] >= 2
+    out = tmp_path / "seq"
+    r = runner.invoke(
+        app,
+        [
+            "simulate",
+            "sim-eoi",
+            "--out",
+            str(out),
+            "--max-frames",
+            "2",
+            "--param",
+            "trajectory.params.semi_minor=1e1",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert load_scenario(out / "scenario.yaml").trajectory.params["semi_minor"] == 10.0

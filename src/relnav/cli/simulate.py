@@ -44,9 +44,9 @@ def build_scenario(
                 f"{', '.join(allowed) or '(none)'}; scenario fields use dotted keys "
                 "(e.g. trajectory.params.loops=3)"
             )
-        import yaml
+        from relnav.sim.scenario import _parse_value
 
-        opts = {k: yaml.safe_load(v) for k, v in plain.items()}
+        opts = {k: _parse_value(v) for k, v in plain.items()}
         kwargs: dict[str, Any] = {}
         if scale_to is not None:
             kwargs["scale_to"] = scale_to
@@ -131,7 +131,8 @@ def simulate(
     """Simulate a sensor around a target and write a sequence folder.
 
     Presets: real-fb, real-curved, sim-eoi, sim-helical, sim-voyager, sim-orion, sim-bennu
-    (Paper 1) and li-rotating (Paper 2: Kinect + LIDAR, options distance and axis).
+    (Paper 1); li-rotating (Paper 2: Kinect + LIDAR, options distance and axis); dense-flash
+    (option resolution), dense-kinect, dense-hdl64 (dense sensors for the scale benchmark).
 
     Examples: [bold]relnav simulate sim-voyager --out seq[/];
     [bold]relnav simulate li-rotating --out li --param distance=2.4 --param axis=y[/];

@@ -317,10 +317,28 @@ def default_scenario() -> Scenario:
 
 
 def _parse_value(text: str) -> Any:
+    """A command-line value parsed as YAML, and a number YAML 1.1 leaves as a string (``1e1``,
+    ``1E-3``, ``1_000``) parsed as that number; unparsable text stays the text."""
     try:
-        return yaml.safe_load(text)
+        value = yaml.safe_load(text)
     except yaml.YAMLError:
         return text
+    return _yaml_numbers(value)
+
+
+def _yaml_numbers(value: Any) -> Any:
+    """Strings that Python reads as numbers (``"1e1"``) → numbers, in lists and dicts too."""
+    if isinstance(value, list):
+        return [_yaml_numbers(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _yaml_numbers(v) for k, v in value.items()}
+    if isinstance(value, str):
+        for kind in (int, float):
+            try:
+                return kind(value.strip())
+            except ValueError:
+                pass
+    return value
 
 
 def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
