@@ -57,9 +57,13 @@ RUN_OUTPUTS = (
 def output_error(e: OSError, path: str | Path | None = None) -> OutputError:
     """One line for an ``OSError`` met while writing: the path and the reason."""
     where = e.filename if e.filename is not None else path
+    if where is not None:  # a temporary sibling (.name.pid.tmp) is reported by its final name
+        q = Path(os.fsdecode(where))
+        parts = q.name.split(".")
+        if len(parts) >= 4 and parts[0] == "" and parts[-1] == "tmp" and parts[-2].isdigit():
+            where = q.with_name(".".join(parts[1:-2]))
     reason = e.strerror or str(e) or type(e).__name__
-    hint = {28: " (the disk is full)", 30: " (read-only file system)", 13: " (permission)"}
-    return OutputError(f"{where}: cannot write: {reason}{hint.get(e.errno or 0, '')}")
+    return OutputError(f"{where}: cannot write: {reason}")
 
 
 class RunFolder:

@@ -35,6 +35,7 @@ from relnav.scan import Scan
 
 __all__ = [
     "UNITS_FACTOR",
+    "UNITS_FACTOR_GT",
     "FileSequence",
     "content_hash",
     "open_sequence",
@@ -314,28 +315,25 @@ def content_hash(paths: Sequence[Path], root: Path | None = None) -> str:
 
 
 UNITS_FACTOR = 1000.0
-"""A scan extending this many times beyond the sensor's range or the scene's size is taken as
-written in other units (millimetres instead of metres)."""
+"""A scan extending this many times beyond the sensor's range (or the target's size, when no
+ground truth gives the distance) is taken as written in other units (millimetres, not metres)."""
+UNITS_FACTOR_GT = 100.0
+"""The same against the ground truth's largest sensor-to-target distance (a scan cannot reach
+much beyond the target it sees)."""
 
 
-def _scene_lengths(seq: Any) -> list[tuple[float, str]]:
-    """Lengths (m) a scan of ``seq`` should stay within: the sensor's range, the target's size
-    and the ground truth's farthest sensor-to-origin distance, where known."""
-    out: list[tuple[float, str]] = []
+def _scene_lengths(seq: Any) -> list[tuple[float, float, str]]:
+    """``(length m, factor, what)`` a scan of ``seq`` should stay within ``factor`` times of:
+    the sensor's range, the ground truth's farthest sensor-to-target distance, or else the
+    target's size, where known."""
+    out: list[tuple[float, float, str]] = []
     meta = getattr(seq, "sensor_meta", None) or {}
     try:
         r = float(meta.get("max_range", np.inf))
     except (TypeError, ValueError):
         r = np.inf
     if np.isfinite(r) and r > 0:
-        out.append((r, "the sensor's range"))
-    try:
-        sc = getattr(seq, "scenario", None) or {}
-        size = float((sc.get("target") or {}).get("scale_to") or 0.0)
-    except (AttributeError, TypeError, ValueError, InputError):
-        size = 0.0
-    if np.isfinite(size) and size > 0:
-        out.append((size, "the target's size"))
+        out.append((r, UNITS_FACTOR, "the sensor's range"))
     try:
         gt = getattr(seq, "gt_poses", None)
     except InputError:
@@ -343,24 +341,31 @@ def _scene_lengths(seq: Any) -> list[tuple[float, str]]:
     if gt is not None and len(gt):
         d = float(np.max(np.linalg.norm(np.asarray(gt)[:, :3, 3], axis=1)))
         if np.isfinite(d) and d > 0:
-            out.append((d, "the ground truth's largest distance to the target"))
+            out.append((d, UNITS_FACTOR_GT, "the ground truth's largest distance to the target"))
+            return out
+    try:
+        sc = getattr(seq, "scenario", None) or {}
+        size = float((sc.get("target") or {}).get("scale_to") or 0.0)
+    except (AttributeError, TypeError, ValueError, InputError):
+        size = 0.0
+    if np.isfinite(size) and size > 0:
+        out.append((size, UNITS_FACTOR, "the target's size"))
     return out
 
 
 def units_warning(seq: Any, points: np.ndarray) -> str | None:
-    """A warning when ``points`` (a scan of ``seq``, ``(N, 3)`` m) extend
-    :data:`UNITS_FACTOR` times or more beyond every length the sequence knows (sensor range,
-    target size, ground-truth distance): the scans are likely in millimetres. ``None``
-    otherwise, or when the sequence knows no length."""
+    """A warning when ``points`` (a scan of ``seq``, ``(N, 3)`` m) reach far beyond a length
+    the sequence knows (:data:`UNITS_FACTOR` x the sensor's range or the target's size,
+    :data:`UNITS_FACTOR_GT` x the ground truth's distance): the scans are likely in
+    millimetres. ``None`` otherwise, or when the sequence knows no length."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    lengths = _scene_lengths(seq)
-    if not len(pts) or not lengths:
+    if not len(pts):
         return None
     extent = float(np.max(np.linalg.norm(pts, axis=1)))
-    ref, what = max(lengths)
-    if extent < UNITS_FACTOR * ref:
-        return None
-    return (
-        f"the first scan reaches {extent:.4g} m, {extent / ref:.0f}x {what} ({ref:.4g} m): "
-        "are the scans in millimetres? relnav reads coordinates in metres"
-    )
+    for ref, factor, what in _scene_lengths(seq):
+        if extent >= factor * ref:
+            return (
+                f"the first scan reaches {extent:.4g} m, {extent / ref:.0f}x {what} "
+                f"({ref:.4g} m): are the scans in millimetres? relnav reads metres"
+            )
+    return None

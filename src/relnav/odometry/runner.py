@@ -416,7 +416,7 @@ def run_sequence(
             raise
         # the frames estimated and streamed are kept; a frame half done is dropped
         interrupted = k = done
-        log.warning("interrupted at frame %d of %d: keeping the %d frames estimated", k, n, k)
+        log.info("interrupted at frame %d of %d: keeping the %d frames estimated", k, n, k)
         if keep_steps:
             del steps[k:]
         times, poses, used_prior = times[:k], poses[:k], used_prior[:k]
