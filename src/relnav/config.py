@@ -118,6 +118,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "curvature_sigma": (0, False, None, False),
     "quadric_reach": (0, True, None, False),
     "repeat_refine": (0, True, None, False),
+    "repeat_max_points": (0, True, None, False),
     "repeat_fraction": (0, True, 1, True),
     "symmetry_max_ratio": (0, True, None, False),
     "symmetry_min_arc_deg": (0, False, 360, True),
@@ -210,12 +211,41 @@ threshold the orbit test compares with); others, such as a correspondence distan
 ``inf`` (no limit)."""
 
 
-def did_you_mean(word: str, choices: Any) -> str:
-    """``" (did you mean 'x'?)"`` for the closest of ``choices``, or ``""``."""
+DID_YOU_MEAN_N = 3
+"""Names a "did you mean" offers at most, nearest first."""
+
+LIST_ALL_MAX = 15
+"""An unknown option's message lists every accepted name only when there are at most this
+many (a method has over a hundred: the nearest names are shown instead)."""
+
+
+def close_names(word: str, choices: Any, n: int = DID_YOU_MEAN_N) -> list[str]:
+    """The ``n`` names of ``choices`` nearest to ``word`` (difflib's ratio ≥ 0.6), nearest
+    first."""
     import difflib
 
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    return difflib.get_close_matches(str(word), [str(c) for c in choices], n=n, cutoff=0.6)
+
+
+def did_you_mean(word: str, choices: Any) -> str:
+    """``" (did you mean 'x', 'y' or 'z'?)"`` for the (at most 3) nearest of ``choices``,
+    nearest first, or ``""``."""
+    close = [repr(c) for c in close_names(word, choices)]
+    if not close:
+        return ""
+    names = close[0] if len(close) == 1 else f"{', '.join(close[:-1])} or {close[-1]}"
+    return f" (did you mean {names}?)"
+
+
+def _accepted(word: str, choices: Any) -> str:
+    """The tail of an unknown-name message: every name when they are few, else how many there
+    are (and the first few alphabetically when none is near ``word``)."""
+    names = sorted(str(c) for c in choices)
+    if len(names) <= LIST_ALL_MAX:
+        return f"accepted: {', '.join(names) or '(none)'}"
+    if close_names(word, names):  # the did-you-mean already shows the nearest
+        return f"{len(names)} options accepted"
+    return f"{len(names)} options accepted, e.g. {', '.join(names[:DID_YOU_MEAN_N])}"
 
 
 def _describe_range(r: _Range) -> str:
@@ -308,9 +338,9 @@ def check_options(
         if key not in params:
             if open_:
                 continue
-            accepted = ", ".join(sorted(params)) or "(none)"
             raise ConfigError(
-                f"{where}: unknown option {key!r}{did_you_mean(key, params)}; accepted: {accepted}"
+                f"{where}: unknown option {key!r}{did_you_mean(key, params)}; "
+                f"{_accepted(key, params)}"
             )
         ann = params[key]
         if ann is not Any:
