@@ -60,6 +60,8 @@ def test_paper_presets_use_the_papers_radius_rule(name):
     assert options.get("radius_from", "source") == "source"
     odo = Odometry(method, **options)
     assert odo.registration.radius_from == "source"
+    assert odo.registration.match_from == "target"
+    assert odo.motion_prior == "identity"  # §3.3.7: no usable cluster -> the initialisation
 
 
 def test_extended_and_competitor_presets():

@@ -45,19 +45,20 @@ class MethodPreset:
 METHOD_PRESETS: dict[str, MethodPreset] = {
     "paper1": MethodPreset(
         "feature:hods+gcc+alphabeta",
-        {},
+        {"motion_prior": "identity"},
         "paper 1's pipeline as published: HoD-S descriptors, GCC grouping, adaptive αβ filter, "
-        "one support radius from the new scan's resolution for both scans",
+        "one support radius from the new scan's resolution for both scans; a step without a "
+        "usable GCC cluster keeps the filter's initialisation (the identity)",
     ),
     "paper1-own-radius": MethodPreset(
         "feature:hods+gcc+alphabeta",
-        {"radius_from": "own"},
+        {"radius_from": "own", "motion_prior": "identity"},
         "paper 1's pipeline with relnav's radius per scan (reuses the previous scan's "
         "descriptors; not the paper's rule, docs/paper1-deviations.md)",
     ),
     "paper1-svd": MethodPreset(
         "feature:hods+gcc+svd",
-        {},
+        {"motion_prior": "identity"},
         "paper 1's HoD-S + GCC correspondences, SVD (Kabsch) instead of the adaptive filter",
     ),
     "extended": MethodPreset(
