@@ -41,6 +41,11 @@ def test_demo_writes_one_folder_per_method_and_a_narrow_table(tmp_path):
     assert p1["preset"] == "paper1" and p1["method"] == "feature:hods+gcc+alphabeta"
     # the table fits 80 columns: no cut labels, and a legend for the letters
     lines = res.output.splitlines()
+    paths = [line for line in lines if str(out) in line]  # printed whole, as typed
+    for m in metrics["methods"]:
+        assert any(line.endswith(f"{out / 'runs' / run_folder_name(m)}/") for line in paths), m
+    assert f"wrote {out / 'trajectory.png'}" in paths
+    lines = [line for line in lines if line not in paths]
     assert all(len(line) <= 80 for line in lines), max(lines, key=len)
     assert "…" not in res.output
     assert "relnav" in res.output and "paper1" in res.output

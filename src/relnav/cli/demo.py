@@ -107,12 +107,15 @@ _QUEUE: Any = None
 
 
 def _worker_init(queue: Any) -> None:
-    """A worker ignores Ctrl-C (the CLI process ends the pool) and reports frames to ``queue``."""
+    """A worker ignores Ctrl-C (the CLI process ends the pool), reports frames to ``queue`` and
+    imports the odometry modules while the CLI process simulates."""
     import signal
 
     global _QUEUE
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _QUEUE = queue
+    import relnav.cli.odometry
+    import relnav.odometry  # noqa: F401
 
 
 def _worker_run(*job: Any) -> tuple[dict[str, Any], _Trajectory]:
@@ -121,39 +124,90 @@ def _worker_run(*job: Any) -> tuple[dict[str, Any], _Trajectory]:
     return _run_method(*job, progress=lambda: _QUEUE.put(m))
 
 
-def _run_side_by_side(
-    jobs: list[tuple], n: int, bar: Any, tasks: dict[str, Any]
-) -> dict[str, tuple[dict[str, Any], _Trajectory]]:
-    """The methods' runs in ``n`` spawned processes (each compiles its own kernels, the cold
-    run's main cost; results are identical to a sequential run), the progress bars fed from a
-    queue. Ctrl-C ends the workers."""
-    import multiprocessing as mp
-    import queue as queue_mod
+class _Workers:
+    """``n`` spawned processes that run methods beside the CLI process (each compiles its own
+    kernels, the cold run's main cost; the results are those of a sequential run). Started
+    before the simulation so that their imports overlap it; :meth:`close` ends them (also on
+    Ctrl-C)."""
 
-    ctx = mp.get_context("spawn")
-    q = ctx.Queue()
-    pool = ctx.Pool(n, initializer=_worker_init, initargs=(q,))
-    try:
-        pending = {j[1]: pool.apply_async(_worker_run, j) for j in jobs}
-        results: dict[str, tuple[dict[str, Any], _Trajectory]] = {}
-        while len(results) < len(pending):
-            try:
-                bar.advance(tasks[q.get(timeout=0.1)])
-            except queue_mod.Empty:
-                pass
+    def __init__(self, n: int) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.queue = ctx.Queue()
+        self.pool = ctx.Pool(n, initializer=_worker_init, initargs=(self.queue,))
+
+    def run(
+        self, jobs: list[tuple], bar: Any, tasks: dict[str, Any]
+    ) -> dict[str, tuple[dict[str, Any], _Trajectory]]:
+        """The first job in this process, the others in the workers; progress bars fed from the
+        workers' queue."""
+        pending = {j[1]: self.pool.apply_async(_worker_run, j) for j in jobs[1:]}
+
+        def tick(t: Any = tasks[jobs[0][1]]) -> None:
+            bar.advance(t)
+            self._drain(bar, tasks)
+
+        results = {jobs[0][1]: _run_method(*jobs[0], progress=tick)}
+        while len(results) < len(jobs):
+            self._drain(bar, tasks, timeout=0.1)
             for m, r in pending.items():
                 if m not in results and r.ready():
                     results[m] = r.get()  # re-raises a worker's error here
-        while True:  # the last frames' ticks
-            try:
-                bar.advance(tasks[q.get_nowait()])
-            except queue_mod.Empty:
-                break
-        pool.close()
+        self._drain(bar, tasks)
         return results
-    finally:
-        pool.terminate()
-        pool.join()
+
+    def _drain(self, bar: Any, tasks: dict[str, Any], timeout: float | None = None) -> None:
+        import queue as queue_mod
+
+        try:
+            if timeout is not None:
+                bar.advance(tasks[self.queue.get(timeout=timeout)])
+            while True:
+                bar.advance(tasks[self.queue.get_nowait()])
+        except queue_mod.Empty:
+            pass
+
+    def close(self) -> None:
+        """End the workers."""
+        self.pool.terminate()
+        self.pool.join()
+
+
+def _simulate_and_run(
+    scenario: Any,
+    preset: str,
+    frames: int,
+    seq_dir: Path,
+    method: list[str],
+    resolved: dict[str, tuple],
+    out: Path,
+    seed: int,
+    workers: _Workers | None,
+    timings: dict[str, float],
+) -> tuple[dict[str, _Trajectory], dict[str, dict[str, Any]]]:
+    """Simulate the sequence, then run every method (side by side with ``workers``) and write
+    its run folder; returns the trajectories and metrics by method."""
+    import time
+
+    from relnav.io.sequences import ScanSequence
+    from relnav.sim.scenario import simulate
+
+    with progress_bar() as bar:
+        task = bar.add_task(f"simulate {preset}", total=min(frames, scenario.frames))
+        t0 = time.perf_counter()
+        simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
+        timings["simulate_s"] = time.perf_counter() - t0
+        n = len(ScanSequence(seq_dir))
+        tasks = {m: bar.add_task(m, total=n) for m in method}
+        jobs = [(seq_dir, m, *resolved[m], out / "runs" / run_folder_name(m), seed) for m in method]
+        if workers is not None:
+            results = workers.run(jobs, bar, tasks)
+        else:
+            results = {
+                j[1]: _run_method(*j, progress=lambda t=tasks[j[1]]: bar.advance(t)) for j in jobs
+            }
+    return {m: results[m][1] for m in method}, {m: results[m][0] for m in method}
 
 
 def demo(
@@ -186,7 +240,6 @@ def demo(
     OUT/trajectory.png, OUT/errors.png and OUT/run.json for all methods together.
     """
     import json
-    import time
 
     from rich.table import Table
 
@@ -197,7 +250,6 @@ def demo(
     from relnav.io.sequences import ScanSequence
     from relnav.odometry.presets import resolve_method
     from relnav.sim.presets import get_preset
-    from relnav.sim.scenario import simulate
 
     method = list(method) if method else default_methods()
     resolved = {m: resolve_method(m) for m in method}  # unknown names fail before any work
@@ -206,24 +258,16 @@ def demo(
     seq_dir = out / "sequence"
     scenario = get_preset(preset, max_frames=frames, seed=seed)
     timings: dict[str, float] = {}
-    with progress_bar() as bar:
-        task = bar.add_task(f"simulate {preset}", total=min(frames, scenario.frames))
-        t0 = time.perf_counter()
-        simulate(scenario, seq_dir, progress=lambda *a: bar.advance(task), overwrite=True)
-        timings["simulate_s"] = time.perf_counter() - t0
-        seq = ScanSequence(seq_dir)
-        tasks = {m: bar.add_task(m, total=len(seq)) for m in method}
-        jobs_ = [
-            (seq_dir, m, *resolved[m], out / "runs" / run_folder_name(m), seed) for m in method
-        ]
-        if jobs > 1 and len(method) > 1:
-            results = _run_side_by_side(jobs_, min(jobs, len(method)), bar, tasks)
-        else:
-            results = {
-                j[1]: _run_method(*j, progress=lambda t=tasks[j[1]]: bar.advance(t)) for j in jobs_
-            }
-    runs = {m: results[m][1] for m in method}
-    metrics: dict[str, dict] = {m: results[m][0] for m in method}
+    n_workers = min(jobs, len(method)) - 1
+    workers = _Workers(n_workers) if n_workers > 0 else None
+    try:
+        runs, metrics = _simulate_and_run(
+            scenario, preset, frames, seq_dir, method, resolved, out, seed, workers, timings
+        )
+    finally:
+        if workers is not None:
+            workers.close()
+    seq = ScanSequence(seq_dir)
     folders = {m: f"runs/{run_folder_name(m)}" for m in method}
     (out / "metrics.json").write_text(
         json.dumps(
@@ -281,16 +325,14 @@ def demo(
     console.print(table)
     for m in runs:
         legend = f"{labels[m]} = {m}" if labels[m] != m else m
-        console.print(f"  {legend}: {folders[m]}/", highlight=False)
+        # the path as the user can type it (never broken across lines)
+        console.print(f"  {legend}: {out / folders[m]}/", highlight=False, soft_wrap=True)
     console.print(
         "  time_ms = median per frame; `relnav evaluate --metrics` defines every metric",
         highlight=False,
     )
-    console.print(
-        f"wrote {out / 'metrics.json'}, {out / 'trajectory.png'}, {out / 'errors.png'}, "
-        f"{out / 'run.json'}",
-        highlight=False,
-    )
+    for name in ("metrics.json", "trajectory.png", "errors.png", "run.json"):
+        console.print(f"wrote {out / name}", highlight=False, soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:
