@@ -54,6 +54,7 @@ from scipy.spatial import cKDTree
 
 from relnav.geometry.kdtree import _kd_build_select, _kd_query
 from relnav.navigation.gicp import ScanToMapFit
+from relnav.navigation.voxel_map import even_subset
 
 if TYPE_CHECKING:  # pragma: no cover
     from relnav.navigation.navigator import Navigator
@@ -149,7 +150,9 @@ class RepeatedPoints:
         c = self.nav.config
         if not self.should_test(self.nav.n_frames) or fit.n_pairs < c.min_points:
             return fit, float("nan"), False
-        full = self.nav.full_scan  # repeated points are exact constraints: use them all
+        full = self.nav.full_scan  # repeated points are exact constraints: use them all,
+        if c.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
+            full = even_subset(full, c.repeat_max_points)
         trial, frac = self.refine(full if len(full) > len(P) else P, fit.T, T_pred, Lam, gate, rng)
         repeated = frac >= c.repeat_fraction
         if primary:
