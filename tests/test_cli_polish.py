@@ -43,3 +43,46 @@ def test_unknown_option_message_is_short_with_many_options():
     with pytest.raises(ConfigError) as e:
         check_options(_many, {"zzz": 1}, where="m")  # few options: all of them listed
     assert "accepted: max_map_points, max_points, min_points" in str(e.value)
+
+
+def test_tables_are_full_width_when_stdout_is_not_a_terminal(monkeypatch):
+    import io
+
+    from rich.table import Table
+
+    from relnav.cli._common import PIPE_WIDTH, CliConsole
+
+    monkeypatch.delenv("COLUMNS", raising=False)
+    table = Table()
+    for i in range(12):
+        table.add_column(f"kiss-icp-method-{i}")
+    table.add_row(*(f"{1.8812345e-05 * (i + 1):.6e}" for i in range(12)))
+    buf = io.StringIO()
+    con = CliConsole(file=buf)
+    assert not con.is_terminal and con.width == PIPE_WIDTH
+    con.print(table)
+    text = buf.getvalue()
+    assert "…" not in text and "1.881234e-05" in text and "kiss-icp-method-11" in text
+    # COLUMNS or an explicit width still decide
+    monkeypatch.setenv("COLUMNS", "80")
+    assert CliConsole(file=io.StringIO()).width == 80
+    assert CliConsole(file=io.StringIO(), width=100).width == 100
+
+
+def test_piped_cli_table_is_not_cut(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    r = subprocess.run(
+        [sys.executable, "-m", "relnav.cli.main", "methods"],
+        capture_output=True,
+        text=True,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "…" not in r.stdout
+    assert "constant-velocity filter of pose and velocity as the prior" in r.stdout

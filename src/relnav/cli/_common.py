@@ -6,12 +6,39 @@ from collections.abc import Iterable
 from typing import Any
 
 import yaml
-from rich.console import Console
+from rich.console import Console, ConsoleDimensions
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from relnav.errors import ConfigError
 
-console = Console()
+PIPE_WIDTH = 1000
+"""Columns of the CLI's output when stdout is not a terminal and ``COLUMNS`` is not set: a
+table piped to a file or another program is written at its full width, never cut to 80
+columns with ``…``."""
+
+
+class CliConsole(Console):
+    """A rich console that is :data:`PIPE_WIDTH` wide when its output is not a terminal (and
+    neither ``COLUMNS`` nor an explicit width says otherwise); a terminal's own width else."""
+
+    @property
+    def size(self) -> ConsoleDimensions:
+        """The console's (width, height); see the class."""
+        dims = super().size
+        if (
+            self._width is None
+            and not self.is_terminal
+            and not self._environ.get("COLUMNS", "").isdigit()
+        ):
+            return ConsoleDimensions(PIPE_WIDTH, dims.height)
+        return dims
+
+    @size.setter
+    def size(self, new_size: tuple[int, int]) -> None:
+        self._width, self._height = new_size
+
+
+console = CliConsole()
 
 
 def parse_options(
