@@ -86,3 +86,81 @@ def test_piped_cli_table_is_not_cut(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "…" not in r.stdout
     assert "constant-velocity filter of pose and velocity as the prior" in r.stdout
+
+
+def _helix(n: int = 40, turn: float = 1.0) -> tuple:
+    """A target-frame path with turning attitude (``turn`` scales the angles): times (N,),
+    poses (N, 4, 4)."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    t = np.arange(n, dtype=float)
+    P = np.tile(np.eye(4), (n, 1, 1))
+    a = 0.05 * t
+    P[:, :3, 3] = np.c_[20 * np.cos(a), 20 * np.sin(a), 0.3 * t]
+    P[:, :3, :3] = Rotation.from_rotvec(turn * np.c_[0.01 * t, 0.02 * t, a]).as_matrix()
+    return t, P
+
+
+def _evaluate(tmp_path, est_lines_or_poses, *extra, turn: float = 1.0):
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+    from relnav.io.trajectories import write_tum
+
+    t, G = _helix(turn=turn)
+    write_tum(tmp_path / "gt.tum", t, G)
+    est = tmp_path / "est.tum"
+    if isinstance(est_lines_or_poses, str):
+        est.write_text(est_lines_or_poses)
+    else:
+        write_tum(est, t, est_lines_or_poses)
+    r = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            str(est),
+            str(tmp_path / "gt.tum"),
+            "--json",
+            str(tmp_path / "m.json"),
+            *extra,
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    import json
+
+    return r.output, json.loads((tmp_path / "m.json").read_text())["warnings"]
+
+
+def test_evaluate_suggests_align_for_frames_that_differ_by_a_constant_transform(tmp_path):
+    import numpy as np
+
+    t, G = _helix()
+    # a run started from the identity: E_k = G_0^-1 G_k (plus small noise)
+    E = np.linalg.inv(G[0]) @ G
+    E[:, :3, 3] += np.random.default_rng(0).normal(0, 0.01, (len(t), 3))
+    out, warnings = _evaluate(tmp_path, E)
+    assert len(warnings) == 1 and "--align" in warnings[0] and "constant" in warnings[0]
+    assert "warning:" in out and "--align" in out
+    # aligned: nothing to say
+    _, warnings = _evaluate(tmp_path, E, "--align", "first")
+    assert warnings == []
+    # an estimate that drifts from the right start: no frame hint
+    D = G.copy()
+    D[:, :3, 3] += np.c_[0.05 * t, np.zeros_like(t), np.zeros_like(t)]
+    _, warnings = _evaluate(tmp_path, D)
+    assert warnings == []
+
+
+def test_evaluate_warns_when_most_rotation_errors_are_near_180_deg(tmp_path):
+    from relnav.geometry.rotations import matrix_to_quat
+
+    t, G = _helix(turn=0.1)  # attitudes within ~12° of the identity
+    q = matrix_to_quat(G[:, :3, :3])  # x y z w
+    lines = "".join(
+        f"{ti:.6f} {p[0, 3]:.9f} {p[1, 3]:.9f} {p[2, 3]:.9f} {qi[3]:.9f} {qi[0]:.9f} "
+        f"{qi[1]:.9f} {qi[2]:.9f}\n"
+        for ti, p, qi in zip(t, G, q, strict=True)
+    )  # quaternions written w-first
+    _, warnings = _evaluate(tmp_path, lines, turn=0.1)
+    assert len(warnings) == 1 and "180" in warnings[0] and "w-first" in warnings[0]

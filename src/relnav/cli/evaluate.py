@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import typer
+from rich.markup import escape
 
 from relnav.cli._common import console
 from relnav.errors import InputError
@@ -140,6 +141,99 @@ def evo_table(res: dict, title: str) -> Any:  # type: ignore[type-arg]
     return t
 
 
+FRAME_GAIN = 5.0
+"""The estimate and the ground truth are taken to be in frames that differ by a constant
+transform when aligning their first poses (``--align first``) or an SE(3) fit (``--align
+se3``) divides the unaligned APE translation RMSE by at least this factor."""
+
+FLIP_DEG = 150.0
+"""A rotation error beyond this angle counts as "near 180°" for :func:`frame_hints`."""
+
+
+def _trans_rmse(m: Any) -> float:
+    """APE translation RMSE of matched (aligned) trajectories, m."""
+    d = m.est_poses[:, :3, 3] - m.gt_poses[:, :3, 3]
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def _rot_errors_deg(m: Any) -> np.ndarray:
+    """Geodesic angle between matched estimated and ground-truth rotations, degrees (K,)."""
+    R = np.einsum("kji,kjl->kil", m.gt_poses[:, :3, :3], m.est_poses[:, :3, :3])
+    c = np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return np.degrees(np.arccos(c))
+
+
+def frame_hints(
+    t_est: np.ndarray,
+    P_est: np.ndarray,
+    t_gt: np.ndarray,
+    P_gt: np.ndarray,
+    *,
+    max_diff: float = 0.01,
+    offset: float = 0.0,
+    align: str = "none",
+) -> list[str]:
+    """One-line warnings about the frames of an evaluation, empty when nothing looks wrong.
+
+    - Without alignment: the estimate and ground truth differ by a constant transform (a run
+      that did not start from the ground truth's first pose, another world frame) when
+      ``--align first`` or ``se3`` cuts the APE translation RMSE by :data:`FRAME_GAIN` or more.
+    - Most rotation errors near 180° (beyond :data:`FLIP_DEG`) and no alignment explaining
+      them: rotations transposed, or TUM quaternions written w-first (TUM is
+      ``qx qy qz qw``).
+
+    Parameters
+    ----------
+    t_est, t_gt : (N,), (M,) float
+        Timestamps, s.
+    P_est, P_gt : (N, 4, 4), (M, 4, 4) float
+        Poses (target ← sensor, or any world ← body), m.
+    max_diff, offset : float
+        Association as in ``relnav evaluate``, s.
+    align : str
+        The alignment the evaluation used.
+    """
+    from relnav.errors import RelnavError
+    from relnav.eval.metrics import match_trajectories
+
+    def matched(how: str) -> Any:
+        return match_trajectories(
+            t_est, P_est, t_gt, P_gt, max_diff=max_diff, offset=offset, align=how
+        )
+
+    try:
+        used = matched(align)
+    except RelnavError:
+        return []
+    hints: list[str] = []
+    if align == "none" and len(used.times) >= 3:
+        e0 = _trans_rmse(used)
+        gains = {}
+        for how in ("first", "se3"):
+            try:
+                gains[how] = _trans_rmse(matched(how))
+            except RelnavError:  # e.g. a degenerate (collinear) path for the SE(3) fit
+                continue
+        best = min(gains, key=gains.__getitem__) if gains else None
+        if best is not None and e0 > 1e-9 and gains[best] * FRAME_GAIN <= e0:
+            hints.append(
+                "the estimate and the ground truth look like the same path in frames that "
+                f"differ by a constant transform (APE translation RMSE {e0:.4g} m as is, "
+                f"{gains[best]:.4g} m with --align {best}): did the run start from another "
+                f"pose than the ground truth's first (e.g. initial_pose=identity)? Pass "
+                f"--align {best} (or first/se3/sim3) to compare the paths"
+            )
+            return hints
+    ang = _rot_errors_deg(used)
+    if ang.size and np.mean(ang > FLIP_DEG) > 0.5:
+        hints.append(
+            f"{np.mean(ang > FLIP_DEG):.0%} of the rotation errors are near 180° (beyond "
+            f"{FLIP_DEG:g}°, median {np.median(ang):.1f}°): rotations transposed, or TUM "
+            "quaternions written w-first? (TUM lines are 'time x y z qx qy qz qw')"
+        )
+    return hints
+
+
 def json_safe(res: dict) -> dict:  # type: ignore[type-arg]
     """NaN/inf → None so the JSON is standard."""
     return {
@@ -249,6 +343,11 @@ def evaluate(
         f"align={align.value}{scale})",
         highlight=False,
     )
+    hints = frame_hints(
+        t_est, P_est, t_gt, P_gt, max_diff=max_diff, offset=offset, align=align.value
+    )
+    for hint in hints:
+        console.print(f"[yellow]warning:[/] {escape(hint)}", highlight=False)
 
     if json_path is not None:
         doc: dict[str, object] = json_safe(res)
@@ -262,6 +361,7 @@ def evaluate(
             rotation_error=rotation_error.value,
             units={k: units.get(k, "") for k in res},
             relnav_version=__version__,
+            warnings=hints,
         )
         kept = []
         if json_path.is_file():
