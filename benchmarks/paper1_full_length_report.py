@@ -386,6 +386,35 @@ def main() -> None:
                 lines.append(f"| {s} | {check} | {so.get(check, '—')} | {sp.get(check, '—')} |")
         lines.append("")
     (args.docs / "side_by_side.md").write_text("\n".join(lines) + "\n")
+    # compact table for the README: T_error % mean [min-max] (n), ours | paper
+    short = [
+        "| scenario | HoD-S/αβ: ours | paper | best proposed: ours | paper "
+        "| best competitor, paper's settings: ours | paper | tuned competitor: ours |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s in SCENARIOS:
+        if s not in A:
+            continue
+        ours, paper = A[s], paper_rows(s)
+
+        def c(m: str | None, rows: dict = ours) -> str:
+            if m is None or m not in rows:
+                return "—"
+            a = rows[m]
+            return f"{pretty(m)} {cell(a)} (n={int(a['n'])})"
+
+        def p(m: str | None, paper: dict = paper) -> str:
+            return "—" if m is None else f"{pretty(m)} {fmt(paper[m]['T_error_pct'])}"
+
+        h = combo("hods", "alphabeta")
+        short.append(
+            f"| {s} | {c(h)} | {p(h)} | {c(best_of(ours, PROPOSED, 'T_error_pct'))} "
+            f"| {p(best_of(paper, PROPOSED, 'T_error_pct'))} "
+            f"| {c(best_of(ours, paper_comp, 'T_error_pct'))} "
+            f"| {p(best_of(paper, list(PAPER_COMPETITORS), 'T_error_pct'))} "
+            f"| {c(best_of(ours, tuned_comp, 'T_error_pct'))} |"
+        )
+    (args.docs / "readme_table.md").write_text("\n".join(short) + "\n")
     # ledger
     led = ["# Deviation ledger: measured effect of each switch", ""]
     led += [
