@@ -224,3 +224,27 @@ def test_cli_writes_the_causal_estimate_and_compare_uses_it_by_default(short_orb
         docs[flag] = json.loads(doc.read_text())["runs"]["relnav"]
     assert docs["--causal"]["ape_trans_rmse"] == pytest.approx(metrics["causal"]["ape_trans_rmse"])
     assert docs["--smoothed"]["ape_trans_rmse"] == pytest.approx(metrics["ape_trans_rmse"])
+
+
+# --------------------------------------------------------------------------- disagreement flags
+
+
+@pytest.mark.parametrize(
+    ("info", "fitness", "needle"),
+    [
+        ({"chi2_motion": 45.0}, 0.95, "χ² 45.0 > 30"),
+        ({"chi2_motion": 3.0}, 0.6, "60% of the scan fits"),
+        ({"chi2_motion": 0.1, "recovered": True}, 0.95, "prior was rejected"),
+        ({"chi2_motion": 3.0}, 0.95, ""),
+    ],
+)
+def test_disagreement_between_the_motion_model_and_the_scan(info, fitness, needle):
+    from relnav.navigation.integrity import disagreement
+    from relnav.navigation.options import NavigatorConfig
+    from relnav.registration.result import RegistrationResult
+
+    res = RegistrationResult(T_target_source=np.eye(4), fitness=fitness, info=dict(info))
+    why = disagreement(res, NavigatorConfig())
+    assert (needle in why) if needle else why == ""
+    off = NavigatorConfig(flag_chi2=0, flag_min_fitness=0, flag_recovered=False)
+    assert disagreement(res, off) == ""

@@ -192,7 +192,8 @@ def test_navigator_flags_its_steps_while_the_revisit_alarm_stands(loop_seq):
     # same, and from the first such revisit on every ok step is flagged with the reason
     _, alarmed = _statuses(loop_seq, revisit_alarm_chi2=1e-9, **opts)
     np.testing.assert_array_equal([s.pose for s in alarmed], [s.pose for s in steps])
-    first = next(k for k, s in enumerate(alarmed) if s.result.message.startswith("map incon"))
+    first = next(k for k, s in enumerate(alarmed) if s.result.info.get("revisit_alarm"))
+    assert "map inconsistent" in alarmed[first].result.message
     assert first == tested[0]
     assert all(s.status != "ok" for s in alarmed[first:])
     # off: no test at all

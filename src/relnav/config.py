@@ -165,6 +165,8 @@ OPTION_RANGES: dict[str, _Range] = {
     "flag_probability": (0, True, 1, False),
     "flag_limit_t": (0, False, None, False),
     "flag_limit_r_deg": (0, False, 180, True),
+    "flag_chi2": (0, True, None, False),
+    "flag_min_fitness": (0, True, 1, True),
     # its pose graph (loop_closure)
     "keyframe_every": (1, True, None, False),
     "keyframe_window": (0, True, None, False),

@@ -1,13 +1,21 @@
-"""The probability that a step's error exceeds an alert limit under its covariance: the
-navigator's ``flagged`` label (:meth:`relnav.navigation.navigator.Navigator._judge_integrity`)."""
+"""A step's integrity, the navigator's ``flagged`` label
+(:meth:`relnav.navigation.navigator.Navigator._judge_integrity`): the probability that its error
+exceeds an alert limit under its covariance, and the evidence that the motion model and the scan
+disagree, which that covariance (theirs) cannot show."""
 
 from __future__ import annotations
 
 import functools
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["exceedance_probability"]
+from relnav.registration.result import RegistrationResult
+
+if TYPE_CHECKING:
+    from relnav.navigation.options import NavigatorConfig
+
+__all__ = ["disagreement", "exceedance_probability"]
 
 
 @functools.cache
@@ -50,3 +58,17 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
         np.einsum("ij,ij->i", e[:, 3:], e[:, 3:]) > limit_r**2
     )
     return float(np.mean(out))
+
+
+def disagreement(result: RegistrationResult, c: NavigatorConfig) -> str:
+    """Why an accepted step's motion model and scan disagree beyond what its covariance can
+    say (``flag_chi2``, ``flag_min_fitness``, ``flag_recovered``), or ``""``."""
+    info = result.info
+    chi2 = float(info.get("chi2_motion", 0.0))
+    if c.flag_recovered and info.get("recovered"):
+        return "the motion model's prior was rejected: registered again under the weak prior"
+    if c.flag_chi2 > 0 and chi2 > c.flag_chi2:
+        return f"correction inconsistent with the motion model (χ² {chi2:.1f} > {c.flag_chi2:g})"
+    if c.flag_min_fitness > 0 and result.fitness < c.flag_min_fitness:
+        return f"{result.fitness:.0%} of the scan fits the map (< {c.flag_min_fitness:.0%})"
+    return ""

@@ -48,7 +48,6 @@ from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation import multiview as mv
 from relnav.navigation.attitude_input import AttitudeInput, aided_prediction
-from relnav.navigation.exceedance import exceedance_probability
 from relnav.navigation.gicp import (
     ScanToMapFit,
     degeneracy,
@@ -57,6 +56,7 @@ from relnav.navigation.gicp import (
     solve_scan_to_map,
     variance_factor,
 )
+from relnav.navigation.integrity import disagreement, exceedance_probability
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.options import NavigatorConfig, in_map, loop_closer_options
 from relnav.navigation.orbit import OrbitCorrection, correct_azimuth
@@ -353,6 +353,10 @@ class Navigator:
                     f"step error beyond {c.flag_limit_t:g} m or {c.flag_limit_r_deg:g}° with "
                     f"probability {p:.2f} (> {c.flag_probability:g}) under its covariance"
                 )
+                return
+        why = disagreement(result, c)
+        if why:
+            result.status, result.message = "flagged", why
 
     def skip_frame(self, reason: str) -> OdometryStep:
         """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the

@@ -153,7 +153,7 @@ class NavigatorConfig:
         Honest step flags (0 = off): an ``ok`` step whose probability of being off by more than
         ``flag_limit_t`` metres or ``flag_limit_r_deg`` degrees exceeds this, under the filter's
         step covariance (a zero-mean Gaussian, body frame;
-        :func:`relnav.navigation.exceedance.exceedance_probability`), gets the status
+        :func:`relnav.navigation.integrity.exceedance_probability`), gets the status
         ``flagged``: its pose, the filter and the map are those of an ``ok`` step (the flag
         changes no pose), and the probability is recorded as ``info["exceed_probability"]``.
         **[measured]** Per-step signals against the suite's wrong steps (ground truth for
@@ -189,6 +189,17 @@ class NavigatorConfig:
     flag_limit_t, flag_limit_r_deg : float
         The step error (m, degrees) the flags guard against (the suite's definition of a wrong
         step). Absolute, not scaled with the target: a mission sets its own.
+    flag_chi2, flag_min_fitness, flag_recovered : float, float, bool
+        Evidence that the motion model and the scan disagree, which the covariance cannot show
+        (it is the model's and the scan's own): an ``ok`` step is also ``flagged`` when its
+        correction's χ² against the motion model's prior exceeds ``flag_chi2`` (30 ≈ the χ²₆
+        99.99 % point; 0 = off), when under ``flag_min_fitness`` of the scan's points fit the
+        map within 3σ (0 = off), or (``flag_recovered``) when the model's prior was rejected
+        and the step registered again under the weak prior. Labels only: poses unchanged.
+        **[measured, not held out]** chosen on the stress group (``nav_suite.py --stress``):
+        envisat-jitter1 wrong steps flagged 0 → 32 of 50 (right 0 → 10 of 69), sim-orion-
+        resample 0 → 13 of 30; the suite's right steps flagged +0–1 per sequence
+        (``docs/navigator.md``, "Motion that is not smooth").
     stability_check, stability_k : bool, float
         Stability check (off by default): the scan is registered a second time from the
         first answer displaced by ``stability_k`` σ along the weakest direction of the answer's
@@ -536,6 +547,9 @@ class NavigatorConfig:
     flag_probability: float = 0.5
     flag_limit_t: float = 0.5
     flag_limit_r_deg: float = 5.0
+    flag_chi2: float = 30.0
+    flag_min_fitness: float = 0.8
+    flag_recovered: bool = True
     stability_check: bool = False
     stability_k: float = 2.0
     stability_cap: float = 4.0

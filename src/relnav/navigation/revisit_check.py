@@ -156,14 +156,17 @@ class RevisitCheck:
     def label(self, step: OdometryStep, edge: LoopEdge | None) -> None:
         """Record the frame's test on its result (info ``revisit_chi2`` when a revisit was
         tested) and, while the alarm stands, turn an ``ok`` step into ``flagged`` (info
-        ``revisit_alarm``, the alarm in its message)."""
+        ``revisit_alarm``, the alarm in its message, after the reason of a step flagged
+        already)."""
         if step.result is None:
             return
         if edge is not None:
             step.result.info["revisit_chi2"] = edge.chi2
-        if self.alarm is not None and step.status == "ok":
+        if self.alarm is not None and step.status in ("ok", "flagged"):
+            flagged = step.status == "flagged"  # already, for another reason: both are said
             step.status = step.result.status = "flagged"
-            step.result.message = self.describe_alarm()
+            alarm = self.describe_alarm()
+            step.result.message = f"{step.result.message}; {alarm}" if flagged else alarm
             step.result.info["revisit_alarm"] = True
 
     def summary(self) -> list[dict[str, float | int | bool]]:
