@@ -312,3 +312,17 @@ def test_pcd_huge_count_is_an_input_error(tmp_path):  # case 9
     )
     with pytest.raises(InputError, match="COUNT 99999999999"):
         read_points(p)
+
+
+def test_odometry_over_a_bag_flags_only_the_bad_message(tmp_path):  # case 1, end to end
+    from relnav.odometry import run_sequence
+
+    base = cloud(0, 200)
+    msgs = [pc2(base + np.array([0.02 * k, 0.0, 0.0]), float(k)) for k in range(8)]
+    msgs[4] = pc2(base[:, :2], 4.0, names="xy", step=8)  # no z field
+    seq = BagSequence(write_bag(tmp_path / "a.bag", msgs))
+    run = run_sequence(seq, "icp-point", initial_pose="identity")
+    rows = run.diagnostics()
+    unreadable = [int(r["frame"]) for r in rows if "unreadable scan" in str(r["message"])]
+    assert unreadable == [4]
+    assert len(run.poses) == 8 and np.isfinite(run.poses).all()

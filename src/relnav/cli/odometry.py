@@ -444,7 +444,7 @@ def _run_into(
         fmt=fmt,
         timings={"wall_s": wall},
         extra_outputs=live_file,
-        state_steps=records if records is not None else [],
+        state_steps=records if records is not None and not interrupted else [],
         state_options=state_opts,
         status=status,
     )
