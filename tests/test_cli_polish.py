@@ -164,3 +164,45 @@ def test_evaluate_warns_when_most_rotation_errors_are_near_180_deg(tmp_path):
     )  # quaternions written w-first
     _, warnings = _evaluate(tmp_path, lines, turn=0.1)
     assert len(warnings) == 1 and "180" in warnings[0] and "w-first" in warnings[0]
+
+
+def test_benchmark_ctrl_c_prints_one_line(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) on a Dask benchmark:
+    exit 130, one 'interrupted' line, no traceback from the CLI process or its workers."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(
+        "schema_version: 1\nname: ctrlc\nscenarios:\n  - {preset: sim-bennu, max_frames: 30}\n"
+        "seeds: 40\nmethods:\n  - icp-point\n  - feature:hods+gcc+alphabeta\n"
+    )
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    cmd = [sys.executable, "-m", "relnav.cli.main", "benchmark", str(grid)]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(tmp_path / "b"), "--no-report", "--workers", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+    try:
+        first = proc.stdout.readline()  # the grid's summary line, printed before the cluster
+        assert "jobs on 2 local workers" in first, first
+        time.sleep(6)  # the cluster up and jobs running
+        assert proc.poll() is None, "the benchmark ended before Ctrl-C"
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and "Traceback" not in out, err[-2000:]
+    lines = [ln for ln in out.splitlines() if "interrupted" in ln]
+    assert len(lines) == 1 and "rerun the same command to resume" in lines[0]
+    assert err.strip() == "", err[-2000:]

@@ -348,13 +348,22 @@ def _run_dask(
         client = Client(scheduler, timeout="30s")
         summary.executor = str(scheduler)
     else:
-        cluster = LocalCluster(
-            n_workers=max(1, workers),
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",
-            silence_logs=logging.ERROR,
-        )
+        import signal
+
+        # workers started with Ctrl-C ignored (inherited): the CLI process alone handles it;
+        # their logs silenced (a job's error comes back as its failed row, and a stopped run's
+        # workers would log tracebacks about the closed scheduler)
+        sigint = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            cluster = LocalCluster(
+                n_workers=max(1, workers),
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",
+                silence_logs=logging.CRITICAL,
+            )
+        finally:
+            signal.signal(signal.SIGINT, sigint)
         client = Client(cluster)
         summary.executor = f"LocalCluster(n_workers={max(1, workers)})"
     try:

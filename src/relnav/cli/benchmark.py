@@ -101,15 +101,35 @@ def benchmark(
                     highlight=False,
                 )
 
-        s = run_benchmark(
-            g,
-            out,
-            workers=workers,
-            scheduler=scheduler,
-            force=force,
-            retry_failed=retry_failed,
-            progress=prog,
-        )
+        import signal
+
+        def on_sigint(signum: int, frame: object) -> None:
+            _quiet_teardown()  # before the cluster's teardown, which logs about the interrupt
+            raise KeyboardInterrupt
+
+        previous = signal.signal(signal.SIGINT, on_sigint)
+        try:
+            s = run_benchmark(
+                g,
+                out,
+                workers=workers,
+                scheduler=scheduler,
+                force=force,
+                retry_failed=retry_failed,
+                progress=prog,
+            )
+        except KeyboardInterrupt:
+            _quiet_teardown()
+            bar.stop()
+            console.print(
+                f"[yellow]interrupted[/]: finished jobs are kept in {out / STORE_FILE}; "
+                "rerun the same command to resume",
+                highlight=False,
+                soft_wrap=True,
+            )
+            raise typer.Exit(130) from None
+        finally:
+            signal.signal(signal.SIGINT, previous)
     console.print(
         f"{s.n_jobs} jobs: {s.n_skipped} already finished, {s.n_ok} ok, {s.n_failed} failed "
         f"in {s.wall_s / 60:.1f} min ({s.executor}); store {out / STORE_FILE}",
@@ -120,6 +140,15 @@ def benchmark(
 
         p = write_report(out)
         console.print(f"wrote {p}", highlight=False)
+
+
+def _quiet_teardown() -> None:
+    """After Ctrl-C: nothing more from Dask's, tornado's or asyncio's loggers while the cluster
+    is torn down (their tracebacks are about the interruption itself)."""
+    import logging
+
+    for name in ("distributed", "tornado", "asyncio", "dask"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def report(
