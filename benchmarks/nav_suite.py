@@ -328,8 +328,8 @@ JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
 
 
 ATTITUDE_SIGMA = 0.01
-"""1σ per axis (degrees) of the chaser's measured attitude written beside the jitter sequences
-(``chaser_attitude.tum``: a star tracker's order of magnitude)."""
+"""1σ per axis (degrees) of the chaser's measured attitude written beside the stress group's
+sequences (``chaser_attitude.tum``: a star tracker's order of magnitude)."""
 
 
 def _jittered(sc: dict[str, Any], jitter: float, kind: str = "white") -> dict[str, Any]:
@@ -358,12 +358,14 @@ def stress() -> dict[str, dict[str, Any]]:
         s[f"envisat-jitter{j:g}"] = _jittered(base, j)
     s["envisat-walk0.5"] = _jittered(base, 0.5, "random-walk")
     s["voyager-sparse30"] = {
+        "pointing": {"attitude_sigma_deg": ATTITUDE_SIGMA},
         "target": _mesh("voyager", "voyager", 10.0),
         "sensors": [_flash(80)],
         "seed": 52,
         **_ellipse(60.0, 40.0, 1.0, 10.0, 100),
     }
     s["aura-farstart"] = {
+        "pointing": {"attitude_sigma_deg": ATTITUDE_SIGMA},
         "target": _mesh("aura", "envisat", 10.0),
         "sensors": [_flash(24)],
         "seed": 53,
@@ -616,13 +618,56 @@ def markdown_table(results: dict[str, dict[str, Any]]) -> str:
     return head + "\n".join(rows)
 
 
+def stress_table(plain: dict[str, Any], aided: dict[str, Any]) -> str:
+    """The stress group's table: relnav without and with the chaser attitude input beside the
+    best peer, causal (``plain``: ``--stress --json``; ``aided``: ``--stress --methods relnav -O
+    attitude=1 --json``)."""
+
+    def cell(r: dict[str, Any]) -> str:
+        return (
+            f"{r['ape']:.2f} | {r['rpe_t']:.3f} / {r['rpe_r']:.2f} | {r['wrong']}/{r['n_steps']} "
+            f"({r['wrong_flagged']} flagged; right flagged {r['right_flagged']})"
+        )
+
+    rows = [
+        "| sequence | relnav APE m | RPE m / ° | wrong steps | relnav + attitude APE m | "
+        "RPE m / ° | wrong steps | best peer APE m (which) | best peer RPE m / ° |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for seq, res in plain.items():
+        peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
+        own, att = res.get("relnav", {}), aided.get(seq, {}).get("relnav", {})
+        if "ape" not in own or not peers:
+            continue
+        best = min(peers, key=lambda m: peers[m]["ape"])
+        bt = min(p["rpe_t"] for p in peers.values())
+        br = min(p["rpe_r"] for p in peers.values())
+        a = cell(att) if "ape" in att else "– | – | –"
+        rows.append(
+            f"| {seq} | {cell(own)} | {a} | {peers[best]['ape']:.2f} ({best}) | "
+            f"{bt:.3f} / {br:.2f} |"
+        )
+    return "\n".join(rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     add_sequence_arguments(p)
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS))
     p.add_argument("--json", type=Path, default=None)
     p.add_argument("--write-configs", type=Path, default=None, help="write scenario YAMLs")
+    p.add_argument(
+        "--stress-table",
+        nargs=2,
+        type=Path,
+        metavar=("PLAIN_JSON", "ATTITUDE_JSON"),
+        help="print the stress group's table from two --json files and exit",
+    )
     a = p.parse_args(argv)
+    if a.stress_table:
+        plain, aided = (json.loads(f.read_text()) for f in a.stress_table)
+        print(stress_table(plain, aided))
+        return 0
     if a.write_configs:
         for path in write_configs(a.write_configs):
             print(path)

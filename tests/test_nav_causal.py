@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from nav_scenarios import flash_orbit
-from relnav.errors import InputError
+from relnav.errors import InputError, RelnavError
 from relnav.io.sequences import ScanSequence
 from relnav.io.trajectories import read_tum
 from relnav.odometry import run_sequence
@@ -248,3 +248,24 @@ def test_disagreement_between_the_motion_model_and_the_scan(info, fitness, needl
     assert (needle in why) if needle else why == ""
     off = NavigatorConfig(flag_chi2=0, flag_min_fitness=0, flag_recovered=False)
     assert disagreement(res, off) == ""
+
+
+def test_cli_attitude_input(jittered, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+
+    runner = CliRunner()
+    args = ["odometry", str(jittered), "--max-frames", "8", "--attitude"]
+    out = tmp_path / "att"
+    res = runner.invoke(app, [*args, str(jittered / "chaser_attitude.tum"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["options"]["finalize"]["attitude_input"]["source"] == "chaser_attitude.tum"
+    att = str(jittered / "chaser_attitude.tum")
+    bad = runner.invoke(app, [*args, att, "-m", "icp-point", "-o", str(tmp_path / "icp")])
+    assert bad.exit_code != 0 and "needs the navigator" in str(bad.exception)
+    res = runner.invoke(app, [*args, str(tmp_path / "none.tum"), "-o", str(tmp_path / "x")])
+    assert res.exit_code != 0 and isinstance(res.exception, RelnavError)  # one line from main

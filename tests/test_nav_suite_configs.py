@@ -50,14 +50,14 @@ def test_grid_presets_match_the_script(nav_suite):
 _NAV = _nav_suite()
 
 
-@pytest.mark.parametrize("name", sorted({**_NAV.suite(), **_NAV.holdout()}))
+@pytest.mark.parametrize("name", sorted({**_NAV.suite(), **_NAV.holdout(), **_NAV.stress()}))
 def test_written_scenarios_match_the_script(nav_suite, name):
     """``configs/nav/*.yaml`` (written by ``nav_suite.py --write-configs``) are the script's
     scenarios: same sensor, path, timing, attitude and seed (the target only by name or mesh
     file, whose path the writer makes relative)."""
     written = load_yaml(REPO / "configs" / "nav" / f"{name}.yaml")
-    ours = {**nav_suite.suite(), **nav_suite.holdout()}[name]
-    for key in ("sensors", "frames", "dt", "trajectory", "attitude", "seed"):
+    ours = {**nav_suite.suite(), **nav_suite.holdout(), **nav_suite.stress()}[name]
+    for key in ("sensors", "frames", "dt", "trajectory", "attitude", "pointing", "seed"):
         a, b = written.get(key), ours.get(key)
         if isinstance(b, dict | list | tuple):
             assert _plain(a) == _plain(b), (name, key)

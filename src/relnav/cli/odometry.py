@@ -282,6 +282,16 @@ def odometry(
     dt: float = typer.Option(
         None, "--dt", help="Scan spacing, s, for a folder without times (default 1 s)."
     ),
+    attitude: Path = typer.Option(
+        None,
+        "--attitude",
+        help="The chaser's measured inertial attitude (TUM file of R_W_sensor: star tracker, "
+        "IMU; position columns ignored): the navigator's rotation prior for each step "
+        "(method relnav; a target whose own rotation per frame is small).",
+    ),
+    attitude_sigma_deg: float = typer.Option(
+        0.01, "--attitude-sigma-deg", help="1σ per axis of each --attitude sample, degrees."
+    ),
 ) -> None:
     """Estimate the sensor trajectory; writes estimate.tum, diagnostics.csv and run.json.
 
@@ -309,6 +319,12 @@ def odometry(
         raise ConfigError("--initial-pose and -O initial_pose both given; give one")
     spacing = time_spacing(rate, dt)
     name, opts, preset = prepare_method(method, opts)
+    if attitude is not None:
+        if name != "relnav":
+            raise ConfigError(f"--attitude needs the navigator (method relnav), not {name!r}")
+        from relnav.navigation.attitude_input import AttitudeInput
+
+        opts["attitude"] = AttitudeInput.from_tum(attitude, attitude_sigma_deg)
     preset_prior = opts.pop("motion_prior", None)  # a preset's own (paper1-icp-point: identity)
     motion_prior = motion_prior or prior or preset_prior or "constant_velocity"
     seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
