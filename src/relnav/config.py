@@ -9,6 +9,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from relnav.atomic import read_text_file
 from relnav.errors import ConfigError
 
 __all__ = [
@@ -33,8 +34,6 @@ class StrictModel(BaseModel):
 
 def load_yaml(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping; :class:`ConfigError` naming the file on any problem."""
-    from relnav.io.text import read_text_file  # here: relnav.io imports this module
-
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: no such file")
