@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import signal
 import tracemalloc
+from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import SimpleNamespace
@@ -58,6 +60,17 @@ MEMORY_PER_BYTE = 200
 """Bytes per file byte a read may take beyond the floor."""
 HANG_GUARD_S = 60
 """A read taking longer than this is a hang (the slowest seen reads take milliseconds)."""
+
+STATS: Counter[tuple[str, str]] = Counter()
+"""(reader, outcome) -> examples; written to ``$RELNAV_FUZZ_STATS`` (JSON) when set."""
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _stats() -> Iterator[None]:
+    yield
+    if target := os.environ.get("RELNAV_FUZZ_STATS"):
+        rows = {f"{r} {o}": n for (r, o), n in sorted(STATS.items())}
+        Path(target).write_text(json.dumps(rows, indent=1) + "\n")
 
 
 # --- seeds --------------------------------------------------------------------------------
@@ -201,15 +214,18 @@ def check_points(pts: Any) -> None:
     assert np.isfinite(pts).all()
 
 
-def run_reader(path: Path, data: bytes, read: Callable[[Path], Any]) -> Any:
+def run_reader(path: Path, data: bytes, read: Callable[[Path], Any], name: str) -> Any:
     """Write ``data`` to ``path`` and read it: the result, or None on a RelnavError."""
     path.write_bytes(data)
     with bounded(len(data)):
         try:
-            return read(path)
+            out = read(path)
         except RelnavError as e:
             assert str(e), "an error with an empty message"
+            STATS[(name, type(e).__name__)] += 1
             return None
+    STATS[(name, "read")] += 1
+    return out
 
 
 # --- point-cloud readers ------------------------------------------------------------------
@@ -233,7 +249,7 @@ def test_point_readers_fuzz(ext, point_seeds, tmp_path, traced):
     @PROFILE
     @given(data=mutated(seeds))
     def fuzz(data: bytes) -> None:
-        pts = run_reader(tmp_path / f"case{ext}", data, read_points)
+        pts = run_reader(tmp_path / f"case{ext}", data, read_points, ext)
         if pts is not None:
             check_points(pts)
 
@@ -303,7 +319,7 @@ def test_text_readers_fuzz(kind, tmp_path, traced):
     @PROFILE
     @given(data=mutated([TEXT_SEEDS[kind]]))
     def fuzz(data: bytes) -> None:
-        out = run_reader(tmp_path / "case.txt", data, read)
+        out = run_reader(tmp_path / "case.txt", data, read, kind)
         if kind == "timestamps" and out is not None:
             assert out.dtype == np.float64 and np.isfinite(out).all()
 
@@ -324,7 +340,7 @@ def test_scenario_and_grid_yaml_fuzz(tmp_path, traced):
     @PROFILE
     @given(data=mutated(seeds), which=st.sampled_from([load_scenario, load_grid]))
     def fuzz(data: bytes, which: Callable[[Path], Any]) -> None:
-        run_reader(tmp_path / "case.yaml", data, which)
+        run_reader(tmp_path / "case.yaml", data, which, which.__name__)
 
     fuzz()
 
@@ -334,34 +350,51 @@ def test_scenario_and_grid_yaml_fuzz(tmp_path, traced):
 _BIG = st.one_of(st.integers(-(2**40), 2**40), st.sampled_from(_INTERESTING))
 
 
+_PF_SIZE = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 8: 8}
+
+
 @st.composite
 def pointcloud2(draw: st.DrawFn) -> SimpleNamespace:
-    """A message with random layout fields (valid ones often, absurd ones as often)."""
-    sane = draw(st.booleans())
-    step = draw(st.integers(0, 48)) if sane else draw(_BIG)
-    width = draw(st.integers(0, 64)) if sane else draw(_BIG)
-    height = draw(st.integers(0, 4)) if sane else draw(_BIG)
-    names = draw(st.lists(st.sampled_from("xyzi"), min_size=0, max_size=5))
+    """A valid message (x, y, z of random types at random places, padding, row padding), then
+    0-3 of its layout attributes replaced by random or absurd values."""
+    types = [draw(st.sampled_from(sorted(_PF_SIZE))) for _ in range(3)]
+    order = draw(st.permutations([0, 1, 2]))
+    offsets, at = [0, 0, 0], 0
+    for j in order:
+        at += draw(st.integers(0, 4))
+        offsets[j] = at
+        at += _PF_SIZE[types[j]]
+    step = at + draw(st.integers(0, 8))
+    width, height = draw(st.integers(0, 40)), draw(st.integers(0, 3))
+    row = width * step + draw(st.integers(0, 8))
     fields = [
-        SimpleNamespace(
-            name=n,
-            offset=draw(st.integers(0, 40)) if sane else draw(_BIG),
-            datatype=draw(st.integers(0, 9)),
-            count=draw(st.one_of(st.just(1), _BIG)),
-        )
-        for n in names
+        SimpleNamespace(name=n, offset=offsets[j], datatype=types[j], count=1)
+        for j, n in enumerate("xyz")
     ]
-    row = draw(st.one_of(st.just(0), st.integers(0, 4096), _BIG))
-    data = draw(st.binary(min_size=0, max_size=4096))
-    return SimpleNamespace(
+    nbytes = row * height
+    data = draw(st.binary(min_size=nbytes, max_size=nbytes)) if nbytes <= 4096 else b""
+    msg = SimpleNamespace(
         fields=fields,
         height=height,
         width=width,
         point_step=step,
         row_step=row,
         is_bigendian=draw(st.booleans()),
-        data=np.frombuffer(data, dtype=np.uint8),
+        data=data,
     )
+    for _ in range(draw(st.integers(0, 3))):
+        what = draw(st.sampled_from(["height", "width", "point_step", "row_step", "field", "data"]))
+        if what == "field":
+            f = draw(st.sampled_from(msg.fields))
+            attr = draw(st.sampled_from(["offset", "datatype", "count", "name"]))
+            value = draw(st.sampled_from("xyzi")) if attr == "name" else draw(_BIG)
+            setattr(f, attr, value)
+        elif what == "data":
+            msg.data = draw(st.binary(min_size=0, max_size=4096))
+        else:
+            setattr(msg, what, draw(_BIG))
+    msg.data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    return msg
 
 
 def test_decode_pointcloud2_fuzz(traced):
@@ -374,7 +407,9 @@ def test_decode_pointcloud2_fuzz(traced):
             try:
                 pts = decode_pointcloud2(msg)
             except RelnavError:
+                STATS[("PointCloud2", "InputError")] += 1
                 return
+        STATS[("PointCloud2", "read")] += 1
         check_points(pts)
 
     fuzz()
