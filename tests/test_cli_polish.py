@@ -180,7 +180,8 @@ def test_benchmark_ctrl_c_prints_one_line(tmp_path):
         "schema_version: 1\nname: ctrlc\nscenarios:\n  - {preset: sim-bennu, max_frames: 30}\n"
         "seeds: 40\nmethods:\n  - icp-point\n  - feature:hods+gcc+alphabeta\n"
     )
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    env["PYTHONUNBUFFERED"] = "1"
     cmd = [sys.executable, "-m", "relnav.cli.main", "benchmark", str(grid)]
     proc = subprocess.Popen(
         [*cmd, "--out", str(tmp_path / "b"), "--no-report", "--workers", "2"],
@@ -192,8 +193,12 @@ def test_benchmark_ctrl_c_prints_one_line(tmp_path):
         start_new_session=True,
     )
     try:
-        first = proc.stdout.readline()  # the grid's summary line, printed before the cluster
-        assert "jobs on 2 local workers" in first, first
+        seen = []
+        while not any("jobs on 2 local workers" in ln for ln in seen) and len(seen) < 20:
+            seen.append(proc.stdout.readline())  # the grid's summary, printed before the cluster
+            if not seen[-1]:
+                break
+        assert any("jobs on 2 local workers" in ln for ln in seen), (seen, proc.stderr.read())
         time.sleep(6)  # the cluster up and jobs running
         assert proc.poll() is None, "the benchmark ended before Ctrl-C"
         os.killpg(proc.pid, signal.SIGINT)
@@ -206,3 +211,13 @@ def test_benchmark_ctrl_c_prints_one_line(tmp_path):
     lines = [ln for ln in out.splitlines() if "interrupted" in ln]
     assert len(lines) == 1 and "rerun the same command to resume" in lines[0]
     assert err.strip() == "", err[-2000:]
+
+
+def test_consistency_alarm_has_one_line_of_meaning():
+    from relnav.cli._common import consistency_meaning
+
+    assert consistency_meaning("NIS", 6.1, (5.5, 6.5)) is None
+    hi = consistency_meaning("NIS", 35.0, (5.5, 6.5))
+    lo = consistency_meaning("NEES", 2.0, (11.0, 13.0))
+    assert "\n" not in hi and "overconfident" in hi and "innovations" in hi
+    assert "\n" not in lo and "cautious" in lo and "ground truth" in lo

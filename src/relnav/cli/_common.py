@@ -101,6 +101,33 @@ def _number(value: Any) -> Any:
         return value
 
 
+def consistency_meaning(label: str, mean: float, band: tuple[float, float]) -> str | None:
+    """One line saying what a mean NIS/NEES outside its 95 % band means, or None inside it.
+
+    Parameters
+    ----------
+    label : str
+        ``"NIS"`` (innovations against their predicted covariance) or ``"NEES"`` (errors
+        against the ground truth and the filter's covariance).
+    mean, band : float, (float, float)
+        The mean statistic and its two-sided 95 % band (χ² of that many values).
+    """
+    lo, hi = band
+    what = "innovations" if label == "NIS" else "errors against the ground truth"
+    if mean > hi:
+        return (
+            f"mean {label} {mean:.3g} above its 95 % band [{lo:.2f}, {hi:.2f}]: the {what} are "
+            "larger than the filter's covariance says (overconfident: noise set too low or a "
+            "motion the model does not have)"
+        )
+    if mean < lo:
+        return (
+            f"mean {label} {mean:.3g} below its 95 % band [{lo:.2f}, {hi:.2f}]: the {what} are "
+            "smaller than the filter's covariance says (cautious: noise set too high)"
+        )
+    return None
+
+
 def progress_bar() -> Progress:
     """A rich progress bar writing to the CLI console."""
     return Progress(

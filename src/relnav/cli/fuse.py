@@ -266,6 +266,13 @@ def fuse(
             )
         table.add_row("flagged pairs", str(summary["flagged"]), "", "")
         console.print(table)
+        if summary["flagged"]:
+            console.print(
+                f"[yellow]flagged[/]: {summary['flagged']} of {summary['pairs']} pairs did not "
+                "register (degenerate or failed): their transform is the identity, not an "
+                "estimate (marked x in fuse_errors.png)",
+                highlight=False,
+            )
         console.print(f"wrote fuse.csv, fuse.json, fuse_errors.png to {out}", highlight=False)
         return
     if lidar_scan is None:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import typer
 
-from relnav.cli._common import console, parse_options, progress_bar
+from relnav.cli._common import consistency_meaning, console, parse_options, progress_bar
 
 
 class FilterChoice(StrEnum):
@@ -262,6 +262,16 @@ def track(
             rms = summary[key]["rms"]
             table.add_row(f"RMS {key} error x,y,z ({unit})", ", ".join(f"{x:.4g}" for x in rms))
     console.print(table)
+    if result.n_flagged:
+        console.print(
+            f"[yellow]flagged[/]: {result.n_flagged} of {len(result)} frames had no usable "
+            "measurement (registration flagged or missing); the filter predicted through them",
+            highlight=False,
+        )
+    for key, label in (("nis", "NIS"), ("nees", "NEES")):
+        c = info["consistency"].get(key)
+        if c is not None and (note := consistency_meaning(label, c["mean"], c["band"])):
+            console.print(f"[yellow]alarm[/]: {note}", highlight=False)
     from relnav.io.runinfo import run_info, write_run_info
     from relnav.io.sequences import ScanSequence
 
