@@ -221,3 +221,23 @@ def test_consistency_alarm_has_one_line_of_meaning():
     lo = consistency_meaning("NEES", 2.0, (11.0, 13.0))
     assert "\n" not in hi and "overconfident" in hi and "innovations" in hi
     assert "\n" not in lo and "cautious" in lo and "ground truth" in lo
+
+
+def test_error_envelope_and_figures_like_evo(tmp_path):
+    import numpy as np
+
+    from relnav.eval.plots import plot_errors, plot_trajectories, step_envelope
+
+    env = step_envelope(np.array([[9.0, 9.0], [0.1, 1.0], [0.1, 1.0], [np.nan, 1.0], [0.1, 1.0]]))
+    assert env[0, 0] == 0 and np.isclose(env[2, 0], 3 * np.sqrt(0.02))
+    assert np.isnan(env[3, 0]) and np.isnan(env[4, 0]) and np.isclose(env[4, 1], 6.0)
+    t, G = _helix()
+    good = G.copy()
+    good[:, :3, 3] += 0.01
+    lost = G.copy()
+    lost[:, :3, 3] += np.linspace(0, 50, len(t))[:, None]
+    est = {"lost": lost, "good": good}
+    p = plot_trajectories(tmp_path / "t.png", G, est, title="t")
+    q = plot_errors(tmp_path / "e.png", G, est, step_sigmas={"good": np.full((len(t), 2), 0.01)})
+    for f in (p, q):
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

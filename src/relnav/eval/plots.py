@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from relnav.errors import InputError
 from relnav.eval.metrics import _as_poses, pose_errors
 
-__all__ = ["new_figure", "plot_errors", "plot_trajectories", "save_png"]
+__all__ = ["new_figure", "plot_errors", "plot_trajectories", "save_png", "step_envelope"]
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,54 @@ def _equal_3d(ax, xyz: np.ndarray) -> None:  # type: ignore[no-untyped-def]
     ax.set_zlim(c[2] - r, c[2] + r)
 
 
+_GT_TOP = {**_GT_STYLE, "color": "black", "linewidth": 1.3, "zorder": 10}
+"""Ground truth in the trajectory panels: dashed black, drawn last (on top of every method)."""
+
+INSET_MAX_FRACTION = 0.08
+"""A zoom inset is added to a view when the methods' final errors (the median over the
+methods) are smaller than this fraction of the path's extent: the lines would overlap."""
+
+
+def _translation_errors(gt: np.ndarray | None, est: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-frame ‖t_est − t_gt‖ (m) of every estimate as long as the ground truth (others:
+    none)."""
+    if gt is None:
+        return {}
+    return {
+        n: np.linalg.norm(p[:, :3, 3] - gt[:, :3, 3], axis=1)
+        for n, p in est.items()
+        if p.shape == gt.shape
+    }
+
+
+def _add_zoom(ax, series, centre: np.ndarray, half: float, dims: tuple[int, int]) -> None:  # type: ignore[no-untyped-def]
+    """A zoom inset of ``ax`` around ``centre`` (±``half`` m), in the axes corner that covers
+    the fewest points of ``series`` (``(xyz, style)`` pairs; ``dims`` the view's axes)."""
+    a, b = dims
+    pts = np.concatenate([xyz[:, [a, b]] for xyz, _ in series if len(xyz)])
+    ax.apply_aspect()
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    u = (pts[:, 0] - x0) / max(x1 - x0, 1e-12)
+    v = (pts[:, 1] - y0) / max(y1 - y0, 1e-12)
+    corners = [(0.58, 0.58), (0.02, 0.58), (0.58, 0.02), (0.02, 0.02)]
+    size = 0.4
+    cover = [
+        int(np.sum((u >= cx) & (u <= cx + size) & (v >= cy) & (v <= cy + size)))
+        for cx, cy in corners
+    ]
+    cx, cy = corners[int(np.argmin(cover))]
+    axins = ax.inset_axes((cx, cy, size, size))
+    for xyz, style in series:
+        axins.plot(xyz[:, a], xyz[:, b], **{**style, "label": None})
+    axins.set_xlim(centre[a] - half, centre[a] + half)
+    axins.set_ylim(centre[b] - half, centre[b] + half)
+    axins.set_aspect("equal", adjustable="box")
+    axins.tick_params(labelsize=6)
+    axins.set_title(f"zoom ±{half:.2g} m", fontsize=7, pad=2)
+    ax.indicate_inset_zoom(axins, edgecolor="0.4")
+
+
 def plot_trajectories(
     path: str | Path,
     gt_poses: np.ndarray | None,
@@ -73,16 +121,23 @@ def plot_trajectories(
     title: str | None = None,
     dpi: int = 120,
 ) -> Path:
-    """Write a PNG with a 3-D view, a top view (x–y) and a side view (x–z) of trajectories.
+    """Write a PNG of trajectories in evo's manner: the best estimate coloured by its error,
+    then a top view (x–y) and a side view (x–z) of every method, ground truth on top.
+
+    The methods are drawn from the worst (mean translation error) to the best, so the best is
+    never hidden under a lost one; the ground truth (dashed black) is drawn last. When the
+    errors are small against the path (:data:`INSET_MAX_FRACTION`) each view gets a zoom inset
+    around the end of the path. Without ground truth the first panel is a 3-D view.
 
     Parameters
     ----------
     path : str or Path
         Output ``.png`` file (parent folders are created).
     gt_poses : (N, 4, 4) float64 or None
-        Ground-truth absolute poses (dashed black), or ``None`` to plot estimates only.
+        Ground-truth absolute poses, or ``None`` to plot estimates only.
     estimates : mapping str → (M, 4, 4) float64
-        Estimated absolute poses per method name, in the ground-truth frame (align first).
+        Estimated absolute poses per method name, in the ground-truth frame (align first);
+        an estimate as long as the ground truth is taken as associated frame by frame.
     title : str, optional
         Figure title.
     dpi : int
@@ -93,58 +148,117 @@ def plot_trajectories(
     Path
         The written file.
     """
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
     est = _check_estimates(estimates)
     gt = None if gt_poses is None else _as_poses("gt_poses", gt_poses)
     if gt is None and not est:
         raise InputError("plot_trajectories: nothing to plot (no ground truth, no estimates)")
-    fig = new_figure(15.5, 5.6)
-    # the 3-D panel gets its own wider column so its z label cannot reach the top view's y label
-    gs = fig.add_gridspec(1, 3, width_ratios=(1.15, 1.0, 1.0), wspace=0.08)
-    ax3 = fig.add_subplot(gs[0, 0], projection="3d")
-    ax_top = fig.add_subplot(gs[0, 1])
-    ax_side = fig.add_subplot(gs[0, 2])
-    series: list[tuple[np.ndarray, dict]] = []
+    errs = _translation_errors(gt, est)
+    mean_err = {n: float(np.mean(e)) if len(e) else np.inf for n, e in errs.items()}
+    colours = {n: f"C{i % 10}" for i, n in enumerate(est)}  # stable: the order given
+    order = sorted(est, key=lambda n: -mean_err.get(n, np.inf))  # worst first, best on top
+    series: list[tuple[np.ndarray, dict]] = [
+        (est[n][:, :3, 3], {"linewidth": 1.3, "label": n, "color": colours[n]}) for n in order
+    ]
     if gt is not None:
-        series.append((gt[:, :3, 3], _GT_STYLE))
-    for name, poses in est.items():
-        series.append((poses[:, :3, 3], {"linewidth": 1.2, "label": name}))
+        series.append((gt[:, :3, 3], _GT_TOP))
     all_xyz = np.concatenate([s[0] for s in series if len(s[0])] or [np.zeros((1, 3))])
-    for xyz, style in series:
-        ax3.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], **style)
-        ax_top.plot(xyz[:, 0], xyz[:, 1], **style)
-        ax_side.plot(xyz[:, 0], xyz[:, 2], **style)
-        if len(xyz):
-            color = ax_top.lines[-1].get_color()
-            ax3.plot([xyz[0, 0]], [xyz[0, 1]], [xyz[0, 2]], "o", color=color, markersize=4)
-            ax_top.plot(xyz[0, 0], xyz[0, 1], "o", color=color, markersize=4)
-            ax_side.plot(xyz[0, 0], xyz[0, 2], "o", color=color, markersize=4)
-    _equal_3d(ax3, all_xyz)
-    ax3.set_xlabel("x [m]", labelpad=2)
-    ax3.set_ylabel("y [m]", labelpad=2)
-    ax3.set_zlabel("z [m]", labelpad=2)
-    ax3.set_title("3-D view")
-    for ax, (a, b), name in ((ax_top, "xy", "top view (x–y)"), (ax_side, "xz", "side view (x–z)")):
-        ax.set_xlabel(f"{a} [m]")
-        ax.set_ylabel(f"{b} [m]")
+    fig = new_figure(16.5, 5.8)
+    gs = fig.add_gridspec(1, 3, width_ratios=(1.12, 1.0, 1.0))
+    best = min(mean_err, key=mean_err.__getitem__) if mean_err else None
+    if best is not None:
+        ax0 = fig.add_subplot(gs[0, 0])
+        xy = est[best][:, :3, 3][:, :2]
+        segs = np.stack([xy[:-1], xy[1:]], axis=1)
+        e = errs[best]
+        lc = LineCollection(segs, cmap="jet", linewidth=2.2)
+        lc.set_array(0.5 * (e[:-1] + e[1:]))
+        lc.set_clim(0.0, max(float(np.max(e, initial=0.0)), 1e-12))  # from zero, as a length
+        ax0.add_collection(lc)
+        ax0.plot(
+            gt[:, 0, 3],
+            gt[:, 1, 3],
+            **{**_GT_TOP, "label": None, "color": "0.25", "linewidth": 0.9},
+        )  # type: ignore[index]
+        ax0.autoscale_view()
+        ax0.set_aspect("equal", adjustable="datalim")
+        ax0.grid(True, alpha=0.3)
+        ax0.set_xlabel("x [m]")
+        ax0.set_ylabel("y [m]")
+        ax0.set_title(f"{best} (best): translation error along the path, top view", fontsize=10)
+        cb = fig.colorbar(lc, ax=ax0, shrink=0.85, pad=0.01)
+        cb.set_label("APE translation [m]")
+        cb.formatter.set_useOffset(False)  # type: ignore[attr-defined]
+        cb.update_ticks()
+    else:
+        ax0 = fig.add_subplot(gs[0, 0], projection="3d")
+        for xyz, style in series:
+            ax0.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], **style)
+        _equal_3d(ax0, all_xyz)
+        ax0.set_xlabel("x [m]", labelpad=2)
+        ax0.set_ylabel("y [m]", labelpad=2)
+        ax0.set_zlabel("z [m]", labelpad=2)
+        ax0.set_title("3-D view")
+    views = []
+    for k, ((a, b), name) in enumerate((((0, 1), "top view (x–y)"), ((0, 2), "side view (x–z)"))):
+        ax = fig.add_subplot(gs[0, k + 1])
+        for xyz, style in series:
+            ax.plot(xyz[:, a], xyz[:, b], **style)
+            if len(xyz):
+                ax.plot(xyz[0, a], xyz[0, b], "o", color=style["color"], markersize=4, zorder=11)
+        ax.set_xlabel(f"{'xyz'[a]} [m]")
+        ax.set_ylabel(f"{'xyz'[b]} [m]")
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(True, alpha=0.3)
         ax.set_title(name)
-    from matplotlib.lines import Line2D
-
-    handles = [ax_top.lines[i] for i in range(0, 2 * len(series), 2)]
+        views.append((ax, (a, b)))
+    extent = float(np.ptp(all_xyz, axis=0).max())
+    final = [float(e[-1]) for e in errs.values() if len(e)]
+    if gt is not None and final and extent > 0:
+        half = 4.0 * float(np.median(final)) + 1e-3 * extent
+        if half < INSET_MAX_FRACTION * extent:
+            fig.canvas.draw()  # the views' limits after the layout, for the inset's corner
+            for ax, dims in views:
+                _add_zoom(ax, series, gt[-1, :3, 3], half, dims)
+    handles = [
+        Line2D(
+            [],
+            [],
+            color=style["color"],
+            linestyle=style.get("linestyle", "-"),
+            label=style["label"],
+        )
+        for _, style in reversed(series)
+    ]
     handles.append(
         Line2D([], [], marker="o", color="grey", linestyle="none", markersize=5, label="start")
     )
     fig.legend(
         handles=handles,
         loc="outside lower center",
-        ncol=min(len(handles), 6),
+        ncol=min(len(handles), 7),
         fontsize="small",
         frameon=False,
     )
     if title:
         fig.suptitle(title)
     return save_png(fig, path, dpi)
+
+
+OFF_SCALE = 20.0
+"""An estimate whose largest error exceeds this many times the smallest method's is drawn
+off-scale (clipped, its peak in the legend) so that it does not flatten the others."""
+
+
+def step_envelope(step_sigma: np.ndarray) -> np.ndarray:
+    """3σ of the accumulated steps: ``3 √(Σ_{j≤k} σ_j²)`` per frame, from per-step 1σ values
+    (N, 2) [translation m, rotation deg] (NaN or inf: unknown, the envelope NaN from there)."""
+    s = np.asarray(step_sigma, dtype=np.float64)
+    s = np.where(np.isfinite(s), s, np.nan)
+    s[0] = 0.0  # the first frame is the start: no step
+    return 3.0 * np.sqrt(np.cumsum(s * s, axis=0))
 
 
 def plot_errors(
@@ -156,11 +270,14 @@ def plot_errors(
     title: str | None = None,
     dpi: int = 120,
     log_scale: bool | None = None,
+    step_sigmas: Mapping[str, np.ndarray] | None = None,
 ) -> Path:
     """Write a PNG of per-frame errors: ``‖Δ‖``, signed ``Δx, Δy, Δz`` and the rotation error.
 
     ``Δ_k = t(T_k^GT) − t(T_k^est)`` (metres) and the geodesic rotation error (degrees), as in
-    :func:`relnav.eval.metrics.pose_errors`.
+    :func:`relnav.eval.metrics.pose_errors`. Linear axes scaled from the second frame on (the
+    first is the start, zero by construction); a method more than :data:`OFF_SCALE` times worse
+    than the best is clipped, its peak said in the legend.
 
     Parameters
     ----------
@@ -177,9 +294,11 @@ def plot_errors(
     dpi : int
         Resolution.
     log_scale : bool, optional
-        Logarithmic ‖Δ‖ and rotation axes, and symmetric-log axis errors (linear within the
-        smallest method's range). Default: on when the methods' largest errors differ by more
-        than 20×, so that a method that loses the track does not flatten the others to a line.
+        Logarithmic ‖Δ‖ and rotation axes (default off: linear, as evo's).
+    step_sigmas : mapping str → (N, 2) float64, optional
+        Per-frame step 1σ [translation m, rotation deg] of a method (e.g. the navigator's
+        ``step_sigma_t_m``, ``step_sigma_r_deg``): its accumulated 3σ envelope
+        (:func:`step_envelope`) is shaded under ``‖Δ‖`` and the rotation error.
 
     Returns
     -------
@@ -206,36 +325,76 @@ def plot_errors(
         x = x - x[0] if len(x) else x
         xlabel = "time [s]"
     errs = {name: pose_errors(poses, gt) for name, poses in est.items()}
-    peaks = [float(e.trans.max(initial=0.0)) for e in errs.values()]
-    if log_scale is None:
-        pos = [p for p in peaks if p > 0]
-        log_scale = len(pos) > 1 and max(pos) > 20 * min(pos)
+    k1 = 1 if len(gt) > 1 else 0  # scales from the second frame on
+    peaks = {n: float(np.nanmax(e.trans[k1:], initial=0.0)) for n, e in errs.items()}
+    rpeaks = {n: float(np.nanmax(e.rot_deg[k1:], initial=0.0)) for n, e in errs.items()}
+    pos = [p for p in peaks.values() if p > 0]
+    floor = min(pos) if pos else 0.0
+    off = {n for n, p in peaks.items() if floor > 0 and p > OFF_SCALE * floor}
     fig = new_figure(9, 10.5)
     axes = fig.subplots(5, 1, sharex=True)
     labels = ["‖Δ‖ [m]", "Δx [m]", "Δy [m]", "Δz [m]", "rotation error [deg]"]
+    colours = {n: f"C{i % 10}" for i, n in enumerate(est)}
     for name, pe in errs.items():
         curves = [pe.trans, pe.delta[:, 0], pe.delta[:, 1], pe.delta[:, 2], pe.rot_deg]
+        label = name
+        if name in off:
+            label = f"{name} (off scale: peak {peaks[name]:.3g} m, {rpeaks[name]:.3g}°)"
         for ax, y in zip(axes, curves, strict=True):
-            ax.plot(x, y, linewidth=1.2, label=name)
+            ax.plot(x, y, linewidth=1.2, label=label, color=colours[name])
+    envelopes = {}
+    for name, sig in (step_sigmas or {}).items():
+        sig = np.asarray(sig, dtype=np.float64)
+        if name in errs and sig.shape == (len(gt), 2):
+            envelopes[name] = step_envelope(sig)
+            for ax, col in ((axes[0], 0), (axes[4], 1)):
+                ax.fill_between(
+                    x,
+                    0.0,
+                    envelopes[name][:, col],
+                    color=colours[name],
+                    alpha=0.15,
+                    lw=0,
+                    label=f"{name}: 3σ of its accumulated steps" if col == 0 else None,
+                )
     for ax, lab in zip(axes, labels, strict=True):
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
     for ax in axes[1:4]:
         ax.axhline(0.0, color="black", linewidth=0.6)
+    kept = [n for n in errs if n not in off] or list(errs)
+
+    def span(values: list[np.ndarray]) -> float:
+        v = np.concatenate([np.abs(a[k1:]) for a in values]) if values else np.zeros(1)
+        v = v[np.isfinite(v)]
+        return float(v.max(initial=0.0))
+
+    t_lim = span(
+        [errs[n].trans for n in kept] + [e[:, 0] for n, e in envelopes.items() if n in kept]
+    )
+    r_lim = span(
+        [errs[n].rot_deg for n in kept] + [e[:, 1] for n, e in envelopes.items() if n in kept]
+    )
+    d_lim = span([errs[n].delta[:, i] for n in kept for i in range(3)])
     if log_scale:
         for ax in (axes[0], axes[4]):
             ax.set_yscale("log", nonpositive="mask")
-        lin = max(min(p for p in peaks if p > 0), 1e-6)
-        for ax in axes[1:4]:
-            ax.set_yscale("symlog", linthresh=lin)
+    else:
+        axes[0].set_ylim(0.0, 1.08 * t_lim or 1.0)
+        axes[4].set_ylim(0.0, 1.08 * r_lim or 1.0)
+    for ax in axes[1:4]:
+        ax.set_ylim(-1.08 * d_lim or -1.0, 1.08 * d_lim or 1.0)
     axes[-1].set_xlabel(xlabel)
+    if len(x) > 1:
+        axes[-1].set_xlim(x[0], x[-1])
+    handles, hl = axes[0].get_legend_handles_labels()
     fig.legend(
-        *axes[0].get_legend_handles_labels(),
+        handles,
+        hl,
         loc="outside lower center",
-        ncol=min(len(est), 4),
+        ncol=min(len(handles), 3 if off or envelopes else 4),
         fontsize="small",
         frameon=False,
     )
-    scale_note = " (log scales)" if log_scale else ""
-    fig.suptitle((title or "Error with respect to the ground truth") + scale_note)
+    fig.suptitle(title or "Error with respect to the ground truth")
     return save_png(fig, path, dpi)
