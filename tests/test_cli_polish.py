@@ -241,3 +241,15 @@ def test_error_envelope_and_figures_like_evo(tmp_path):
     q = plot_errors(tmp_path / "e.png", G, est, step_sigmas={"good": np.full((len(t), 2), 0.01)})
     for f in (p, q):
         assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_state_figures_title_says_which_command_made_them():
+    from types import SimpleNamespace
+
+    from relnav.cli.track import state_title
+
+    nav = SimpleNamespace(filter="ukf", meta={"method": "relnav"})
+    assert state_title(nav).startswith("relnav odometry — relnav: relative state")
+    assert state_title(SimpleNamespace(filter="ekf", meta={"observer": "cbd"})) == (
+        "relnav track — EKF"
+    )

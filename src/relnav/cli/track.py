@@ -42,6 +42,15 @@ def _series(result: Any, key: str, truth: bool = False) -> np.ndarray:
     return np.asarray(getattr(src, key))
 
 
+def state_title(result: Any) -> str:
+    """The state figures' title: the navigator's relative state from ``relnav odometry``
+    (``meta["method"]``) or ``relnav track``'s filter on an observer."""
+    method = (getattr(result, "meta", None) or {}).get("method")
+    if method:
+        return f"relnav odometry — {method}: relative state ({result.filter.upper()} on its poses)"
+    return f"relnav track — {result.filter.upper()}"
+
+
 def plot_track(result: Any, path: Path, *, dpi: int = 120) -> Path:
     """Estimate vs truth, 2×2 panels (a) position (b) Euler angles (c) velocity (d) ω."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -65,7 +74,7 @@ def plot_track(result: Any, path: Path, *, dpi: int = 120) -> Path:
         ax.legend(fontsize=7, ncol=2)
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
-    fig.suptitle(f"relnav track — {result.filter.upper()}")
+    fig.suptitle(state_title(result))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
     return path
@@ -98,13 +107,19 @@ def plot_track_errors(result: Any, path: Path, *, dpi: int = 120) -> Path:
         ax.set_title(f"({tag}) {label}, dotted ±3σ")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
+        # scaled to show the errors and the ±3σ bounds (their 95th percentile: an initial
+        # transient of a huge σ may leave the axes, the bounds' level stays visible)
         finite = np.abs(e[np.isfinite(e)])
-        if finite.size:
-            lim = 1.5 * float(np.percentile(finite, 99)) + 1e-12
+        bounds = 3.0 * np.abs(s[np.isfinite(s)])
+        lim = max(
+            1.5 * float(np.percentile(finite, 99)) if finite.size else 0.0,
+            1.15 * float(np.percentile(bounds, 95)) if bounds.size else 0.0,
+        )
+        if lim > 0:
             ax.set_ylim(-lim, lim)
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
-    fig.suptitle(f"relnav track — {result.filter.upper()} errors")
+    fig.suptitle(f"{state_title(result)}: errors")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
     return path
