@@ -166,6 +166,7 @@ OPTION_RANGES: dict[str, _Range] = {
     "flag_limit_r_deg": (0, False, 180, True),
     "flag_chi2": (0, True, None, False),
     "flag_min_fitness": (0, True, 1, True),
+    "flag_after_frames": (0, True, None, False),
     # its pose graph (loop_closure)
     "keyframe_every": (1, True, None, False),
     "keyframe_window": (0, True, None, False),

@@ -161,7 +161,10 @@ def write_run_outputs(
             causal = evaluate_trajectories(
                 run.timestamps, run.causal_poses, seq.timestamps[:n], gt[:n]
             )
-            metrics["causal"] = {k: v for k, v in causal.items() if isinstance(v, int | float)}
+            metrics["causal"] = {
+                k: v for k, v in causal.items() if isinstance(v, int | float) and k in metrics
+            }
+            metrics["causal"].pop("time_ms", None)  # the run's, not the trajectory's
         if run.method == "relnav":  # the navigator's revisit test: revisits tested, failed
             revisits = run.options.get("finalize", {}).get("revisits") or []
             metrics.update(

@@ -354,7 +354,7 @@ class Navigator:
                     f"probability {p:.2f} (> {c.flag_probability:g}) under its covariance"
                 )
                 return
-        why = disagreement(result, c)
+        why = disagreement(result, c) if self.n_frames - self._f0 >= c.flag_after_frames else ""
         if why:
             result.status, result.message = "flagged", why
 
