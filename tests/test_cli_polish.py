@@ -253,3 +253,14 @@ def test_state_figures_title_says_which_command_made_them():
     assert state_title(SimpleNamespace(filter="ekf", meta={"observer": "cbd"})) == (
         "relnav track — EKF"
     )
+
+
+def test_sequence_name_for_titles(tmp_path):
+    from relnav.cli.compare import sequence_name
+
+    seq = tmp_path / "sequence"
+    seq.mkdir()
+    assert sequence_name(str(seq)) == "sequence"
+    (seq / "scenario.yaml").write_text("name: sim-voyager\n")
+    assert sequence_name(str(seq)) == "sim-voyager (sequence)"
+    assert sequence_name(str(tmp_path / "gt.tum")) == "gt.tum"

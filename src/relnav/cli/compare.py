@@ -68,6 +68,70 @@ def _ground_truth(runs: list[Path], gt: Path | None) -> tuple[np.ndarray, np.nda
     return seq.timestamps, seq.gt_poses, str(path)
 
 
+def sequence_name(gt_desc: str) -> str:
+    """A sequence's name for figure titles: its scenario's ``name`` (``scenario.yaml`` of a
+    simulated folder) with the folder's name, else the folder or file name."""
+    p = Path(gt_desc)
+    name = p.name or str(p)
+    sc = p / "scenario.yaml"
+    if sc.is_file():
+        import yaml
+
+        try:
+            scenario = (yaml.safe_load(sc.read_text()) or {}).get("name")
+        except (OSError, yaml.YAMLError, AttributeError):
+            scenario = None
+        if scenario and scenario != name:
+            return f"{scenario} ({name})"
+    return name
+
+
+def _clipped_limit(values: list[np.ndarray]) -> tuple[float, set[int]]:
+    """Upper axis limit for error curves (from their second sample: the first is the start)
+    and the indices of curves more than 20x worse than the best, left off-scale."""
+    peaks = [float(np.nanmax(v[1:], initial=0.0)) if len(v) > 1 else 0.0 for v in values]
+    pos = [p for p in peaks if p > 0]
+    floor = min(pos) if pos else 0.0
+    off = {i for i, p in enumerate(peaks) if floor > 0 and p > 20 * floor}
+    kept = [p for i, p in enumerate(peaks) if i not in off] or peaks
+    return 1.08 * max(kept, default=0.0) or 1.0, off
+
+
+def plot_compare_overview(
+    path: Path, all_series: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], title: str
+) -> Path:
+    """APE and RPE, translation and rotation, of every run over time (2×2, linear axes from the
+    second sample; a run >20x worse than the best is clipped, its peak in the legend)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(13, 8.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 2, sharex=True)
+    names = list(next(iter(all_series.values())))
+    colours = {n: f"C{i % 10}" for i, n in enumerate(names)}
+    for ax, err in zip(axes.flat, ERRORS, strict=True):
+        series = all_series[err]
+        lim, off = _clipped_limit([series[n][1] for n in names])
+        for k, n in enumerate(names):
+            t, e = series[n]
+            label = n if k not in off else f"{n} (off scale, peak {np.nanmax(e):.3g})"
+            ax.plot(t - t[0] if len(t) else t, e, lw=1.2, color=colours[n], label=label)
+        ax.set_ylim(0.0, lim)
+        kind = "APE" if err.startswith("ape") else "RPE"
+        what = "translation" if err.endswith("trans") else "rotation"
+        ax.set_title(f"{kind} {what} ({err})")
+        ax.set_ylabel(f"{err} [{_UNITS[err]}]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize="x-small", loc="upper left")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    return path
+
+
 def plot_compare(
     path: Path, series: dict[str, tuple[np.ndarray, np.ndarray]], error: str, title: str
 ) -> Path:
@@ -88,10 +152,12 @@ def plot_compare(
     ax_box = fig.add_subplot(gs[1, 0])
     ax_bar = fig.add_subplot(gs[1, 1])
     labels = list(series)
-    peaks = [float(np.max(e)) for _, e in series.values() if len(e)]
-    log = len(peaks) > 1 and min(peaks) > 0 and max(peaks) > 20 * min(peaks)
-    for name, (t, e) in series.items():
-        ax_t.plot(t - t[0] if len(t) else t, e, lw=1.2, label=name)
+    lim, off = _clipped_limit([series[k][1] for k in labels])
+    log = False  # linear, as evo_res; a run >20x worse than the best is clipped (see legend)
+    for k, (name, (t, e)) in enumerate(series.items()):
+        label = name if k not in off else f"{name} (off scale, peak {np.nanmax(e):.3g})"
+        ax_t.plot(t - t[0] if len(t) else t, e, lw=1.2, label=label)
+    ax_t.set_ylim(0.0, lim)
     ax_t.set_xlabel("time [s]")
     ax_t.set_ylabel(f"{error} [{unit}]")
     ax_t.set_title(f"(a) {error} over time")
@@ -113,6 +179,9 @@ def plot_compare(
     ax_bar.set_ylabel(f"{error} [{unit}]")
     ax_bar.set_title("(c) statistics (evo names), colours as in (a)")
     ax_bar.grid(True, axis="y", alpha=0.3)
+    if off:
+        ax_box.set_ylim(0.0, lim)
+        ax_bar.set_ylim(0.0, lim)
     if log:
         for ax in (ax_t, ax_box):
             ax.set_yscale("log", nonpositive="mask")
@@ -189,7 +258,7 @@ def compare(
             name, k = f"{base} ({k})", k + 1
         names[name] = r
     results: dict[str, dict[str, Any]] = {}
-    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    all_series: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {e: {} for e in ERRORS}
     estimates: dict[str, np.ndarray] = {}
     for name, r in names.items():
         f = _estimate_file(r, smoothed)
@@ -217,20 +286,21 @@ def compare(
         results[name] = res
         m = match_trajectories(t_e, P_e, t_gt, P_gt, **kw)  # type: ignore[arg-type]
         estimates[name] = m.est_poses
-        if error.startswith("ape"):
-            pe = pose_errors(m.est_poses, m.gt_poses)
-            series[name] = (m.times, pe.trans if error == "ape_trans" else pe.rot_deg)
-        else:
-            from relnav.eval.metrics import rpe_pairs
+        from relnav.eval.metrics import rpe_pairs
 
-            tr, rot = relative_pose_errors(
-                m.est_poses,
-                m.gt_poses,
-                delta=d,
-                delta_unit=delta_unit.value,  # type: ignore[arg-type]
-            )
-            i, _ = rpe_pairs(m.est_poses, d, delta_unit.value)  # type: ignore[arg-type]
-            series[name] = (m.times[i], tr if error == "rpe_trans" else rot)
+        pe = pose_errors(m.est_poses, m.gt_poses)
+        tr, rot = relative_pose_errors(
+            m.est_poses,
+            m.gt_poses,
+            delta=d,
+            delta_unit=delta_unit.value,  # type: ignore[arg-type]
+        )
+        i, _ = rpe_pairs(m.est_poses, d, delta_unit.value)  # type: ignore[arg-type]
+        all_series["ape_trans"][name] = (m.times, pe.trans)
+        all_series["ape_rot"][name] = (m.times, pe.rot_deg)
+        all_series["rpe_trans"][name] = (m.times[i], tr)
+        all_series["rpe_rot"][name] = (m.times[i], rot)
+    series = all_series[error]
 
     labels = short_labels(list(names), width=12)
     summary = Table(
@@ -278,19 +348,28 @@ def compare(
     if plot_dir is not None:
         from relnav.eval.plots import plot_trajectories
 
-        p1 = plot_compare(
+        seq_name = sequence_name(gt_desc)
+        rpe = f"RPE (Δ {d:g} {delta_unit.value})"
+        p0 = plot_compare_overview(
             plot_dir / "compare.png",
+            all_series,
+            f"{seq_name}: APE and {rpe}, {len(names)} runs (align={align.value})",
+        )
+        p1 = plot_compare(
+            plot_dir / f"compare_{error}.png",
             series,
             error,
-            f"{len(names)} runs vs {Path(gt_desc).name} (align={align.value})",
+            f"{seq_name}: {error} of {len(names)} runs (align={align.value}"
+            + (f", {rpe})" if error.startswith("rpe") else ")"),
         )
         p2 = plot_trajectories(
             plot_dir / "trajectories.png",
             P_gt,
             estimates,
-            title=f"{len(names)} runs vs {Path(gt_desc).name}",
+            title=f"{seq_name}: {len(names)} runs (align={align.value})",
         )
-        console.print(f"wrote {p1} and {p2}", highlight=False)
+        for p in (p0, p1, p2):
+            console.print(f"wrote {p}", highlight=False, soft_wrap=True)
 
 
 def _fmt(v: Any) -> str:
