@@ -345,7 +345,8 @@ def stress() -> dict[str, dict[str, Any]]:
     "the navigator when motion is not smooth"): sensor attitude jitter 0.25–2° per axis per
     frame (white, and a random walk) with 5 cm range noise on a box-and-panel satellite's
     orbit (procedural Envisat); a ~30-point-per-scan orbit of a 10 m satellite at 40–60 m; a
-    start at 40 m with ≤ 15 points per scan closing to 15 m. Made after the suite's parameters
+    straight-line approach from 80 m to 12 m; a start at 40 m with ≤ 15 points per scan closing
+    to 15 m. Made after the suite's parameters
     were frozen."""
     s: dict[str, dict[str, Any]] = {}
     base = {
@@ -363,6 +364,15 @@ def stress() -> dict[str, dict[str, Any]]:
         "sensors": [_flash(80)],
         "seed": 52,
         **_ellipse(60.0, 40.0, 1.0, 10.0, 100),
+    }
+    s["voyager-approach"] = {
+        "pointing": {"attitude_sigma_deg": ATTITUDE_SIGMA},
+        "target": _mesh("voyager", "voyager", 10.0),
+        "sensors": [_flash(64)],
+        "seed": 54,
+        "frames": 120,
+        "dt": 10.0,
+        "trajectory": {"kind": "vbar", "params": {"start": -80.0, "stop": -12.0}},
     }
     s["aura-farstart"] = {
         "pointing": {"attitude_sigma_deg": ATTITUDE_SIGMA},
