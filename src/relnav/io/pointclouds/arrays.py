@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,10 @@ from relnav.io.pointclouds._common import _Cloud, _pick_fields, logger
 
 def _read_npy(p: Path) -> _Cloud:
     try:
-        arr = np.load(p, allow_pickle=False)
+        with warnings.catch_warnings():  # a corrupt header is parsed as a Python literal
+            warnings.simplefilter("ignore", SyntaxWarning)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            arr = np.load(p, allow_pickle=False)
     except Exception as e:  # ValueError, EOFError, OSError on corrupt/truncated/object arrays
         raise InputError(
             f"{p}: corrupt or unreadable .npy file ({type(e).__name__}: {e})"
