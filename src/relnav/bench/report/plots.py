@@ -132,13 +132,16 @@ def plot_trajectory_panels(
     n = len(groups)
     fig = new_figure(12.0, 4.6 * n)
     axes = np.atleast_2d(fig.subplots(n, 2))
-    (xl, yl, zl) = _limits(gt)
+    views = []
+    for a, b in ((0, 1), (0, 2)):  # each view fitted to the ground truth in its own two axes
+        la, lb = _limits(gt[:, [a, b]])
+        views.append((a, b, la, lb))
     for row, (gtitle, est) in enumerate(groups):
         clipped = []
-        for col, (a, b, la, lb) in enumerate(((0, 1, xl, yl), (0, 2, xl, zl))):
+        for col, (a, b, la, lb) in enumerate(views):
             ax = axes[row, col]
-            ax.plot(gt[:, a], gt[:, b], **_GT)
-            ax.plot(gt[0, a], gt[0, b], "ko", markersize=5)
+            ax.plot(gt[:, a], gt[:, b], **_GT, zorder=10)  # on top of every estimate
+            ax.plot(gt[0, a], gt[0, b], "ko", markersize=5, zorder=11)
             same = _same_as(est)
             for i, (name, xyz) in enumerate(est.items()):
                 p = np.asarray(xyz, dtype=np.float64)
@@ -329,19 +332,16 @@ def plot_time_vs_points(
             scen_x.setdefault(sc, x)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    for k, (sc, x) in enumerate(sorted(scen_x.items(), key=lambda kv: kv[1])):
-        ax.axvline(x, color="gray", linestyle=":", linewidth=0.8)
-        ax.text(
-            x,
-            0.99 - 0.14 * (k % 3),  # staggered so close cardinalities stay readable
-            f"{sc} ",
-            transform=ax.get_xaxis_transform(),
-            rotation=90,
-            va="top",
-            ha="right",
-            fontsize="x-small",
-            color="dimgray",
-        )
+    scen = sorted(scen_x.items(), key=lambda kv: kv[1])
+    for _, x in scen:
+        ax.axvline(x, color="gray", linestyle=":", linewidth=0.8, zorder=0)
+    # the scenarios named on a top axis, clear of the lines (not written over them)
+    top = ax.secondary_xaxis("top")
+    top.set_xticks([x for _, x in scen], labels=[sc for sc, _ in scen], minor=False)
+    top.set_xticks([], minor=True)
+    top.tick_params(labelsize="x-small", labelrotation=30, colors="dimgray")
+    for lab in top.get_xticklabels():
+        lab.set_ha("left")
     ax.set_xlabel("mean points per scan")
     ax.set_ylabel("mean time per frame [ms]")
     ax.grid(True, which="both", alpha=0.25)
