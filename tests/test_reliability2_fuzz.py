@@ -19,6 +19,7 @@ import json
 import os
 import signal
 import tracemalloc
+import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -181,7 +182,8 @@ class _Hang(Exception):
 
 @contextlib.contextmanager
 def bounded(size: int) -> Iterator[None]:
-    """Measure the tracemalloc peak of the block against the file's size; alarm on a hang."""
+    """Measure the tracemalloc peak of the block against the file's size; alarm on a hang;
+    any Python warning raised in the block fails the example."""
 
     def _alarm(signum: int, frame: Any) -> None:
         raise _Hang(f"no answer after {HANG_GUARD_S} s")
@@ -191,7 +193,9 @@ def bounded(size: int) -> Iterator[None]:
     tracemalloc.reset_peak()
     base = tracemalloc.get_traced_memory()[0]
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no warning leaks to the terminal (case 5)
+            yield
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
