@@ -326,3 +326,20 @@ def test_odometry_over_a_bag_flags_only_the_bad_message(tmp_path):  # case 1, en
     unreadable = [int(r["frame"]) for r in rows if "unreadable scan" in str(r["message"])]
     assert unreadable == [4]
     assert len(run.poses) == 8 and np.isfinite(run.poses).all()
+
+
+def test_a_recording_broken_mid_stream_is_an_input_error(tmp_path, monkeypatch):  # case 1
+    seq = BagSequence(write_bag(tmp_path / "a.bag", [pc2(cloud(k), float(k)) for k in range(5)]))
+    real = BagSequence._stream
+
+    def broken(self):  # type: ignore[no-untyped-def]
+        for k, scan in real(self):
+            if k == 2:
+                raise ValueError("chunk CRC mismatch")
+            yield k, scan
+
+    monkeypatch.setattr(BagSequence, "_stream", broken)
+    np.testing.assert_array_equal(seq[1].points, cloud(1).astype("f4"))
+    with pytest.raises(InputError, match=r"cannot read message 2 .*CRC"):
+        seq[2]
+    np.testing.assert_array_equal(seq[0].points, cloud(0).astype("f4"))  # reopened

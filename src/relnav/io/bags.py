@@ -402,16 +402,24 @@ class BagSequence:
             self._ctx.__enter__()
             self._iter = self._stream()
             self._next_msg = 0
-        for k, scan in self._iter:
-            self._next_msg = k + 1
-            if k == want:
-                if isinstance(scan, InputError):
-                    raise scan
-                self._last = (k, scan)
-                return scan
-        raise InputError(
-            f"{self._path}: message {want} of {self._topic} vanished"
-        )  # pragma: no cover
+        try:
+            for k, scan in self._iter:
+                self._next_msg = k + 1
+                if k == want:
+                    if isinstance(scan, InputError):
+                        raise scan
+                    self._last = (k, scan)
+                    return scan
+        except InputError:
+            raise
+        except Exception as e:  # the recording itself broke mid-stream: reopened next time
+            self._close()
+            raise InputError(
+                f"{self._path}: cannot read message {want} of {self._topic} "
+                f"({type(e).__name__}: {e})"
+            ) from None
+        self._close()  # pragma: no cover - init counted the messages
+        raise InputError(f"{self._path}: message {want} of {self._topic} is missing")
 
     def __iter__(self) -> Iterator[Scan]:
         for i in range(len(self)):
