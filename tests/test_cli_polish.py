@@ -102,14 +102,14 @@ def _helix(n: int = 40, turn: float = 1.0) -> tuple:
     return t, P
 
 
-def _evaluate(tmp_path, est_lines_or_poses, *extra, turn: float = 1.0):
+def _evaluate(tmp_path, est_lines_or_poses, *extra, turn: float = 1.0, gt=None):
     from typer.testing import CliRunner
 
     from relnav.cli.main import app
     from relnav.io.trajectories import write_tum
 
     t, G = _helix(turn=turn)
-    write_tum(tmp_path / "gt.tum", t, G)
+    write_tum(tmp_path / "gt.tum", t, G if gt is None else gt)
     est = tmp_path / "est.tum"
     if isinstance(est_lines_or_poses, str):
         est.write_text(est_lines_or_poses)
@@ -264,3 +264,17 @@ def test_sequence_name_for_titles(tmp_path):
     (seq / "scenario.yaml").write_text("name: sim-voyager\n")
     assert sequence_name(str(seq)) == "sim-voyager (sequence)"
     assert sequence_name(str(tmp_path / "gt.tum")) == "gt.tum"
+
+
+def test_evaluate_explains_a_legacy_euler_peak_far_above_the_geodesic_error(tmp_path):
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    t, G = _helix(turn=0.0)
+    G[:, :3, :3] = Rotation.from_euler("z", 179.99, degrees=True).as_matrix()
+    E = G.copy()
+    E[:, :3, :3] = Rotation.from_euler("z", -179.99, degrees=True).as_matrix()  # 0.02° away
+    out, _ = _evaluate(tmp_path, E, turn=0.0, gt=G)
+    assert "note: e_R_euler_peak" in out and "e_R_max is the rotation error" in out
+    out, _ = _evaluate(tmp_path, G, turn=0.0, gt=G)
+    assert "note: e_R_euler_peak" not in out

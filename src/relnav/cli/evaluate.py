@@ -346,6 +346,14 @@ def evaluate(
     hints = frame_hints(
         t_est, P_est, t_gt, P_gt, max_diff=max_diff, offset=offset, align=align.value
     )
+    euler, geo = res.get("e_R_euler_peak"), res.get("e_R_max")
+    if euler is not None and geo is not None and abs(euler) > 10.0 * geo + 1.0:
+        console.print(
+            f"  note: e_R_euler_peak {euler:.3g}° against a geodesic e_R_max of {geo:.3g}°: "
+            "paper 1's legacy form differences Euler angles one by one, which jump near ±180° "
+            "and gimbal lock; e_R_max is the rotation error",
+            highlight=False,
+        )
     for hint in hints:
         console.print(f"[yellow]warning:[/] {escape(hint)}", highlight=False)
 
