@@ -269,3 +269,26 @@ def test_cli_attitude_input(jittered, tmp_path):
     assert bad.exit_code != 0 and "needs the navigator" in str(bad.exception)
     res = runner.invoke(app, [*args, str(tmp_path / "none.tum"), "-o", str(tmp_path / "x")])
     assert res.exit_code != 0 and isinstance(res.exception, RelnavError)  # one line from main
+
+
+def test_rotated_starts_turn_the_prediction_about_each_sensor_axis():
+    from relnav.geometry.rotations import rotation_angle
+    from relnav.navigation.multistart import rotated_starts
+
+    T = np.eye(4)
+    T[:3, 3] = (1.0, 2.0, 3.0)
+    starts = rotated_starts(T, np.radians(1.0), 2)
+    assert len(starts) == 12
+    angles = sorted(round(np.degrees(rotation_angle(S[:3, :3])), 9) for S in starts)
+    assert angles == [1.0] * 6 + [2.0] * 6
+    assert all(np.allclose(S[:3, 3], T[:3, 3]) for S in starts)  # about the sensor's origin
+
+
+def test_jitter_starts_hold_the_navigator_under_jitter(jittered):
+    """Without the attitude input: the extra starts lower the rotation step error."""
+    seq = ScanSequence(jittered)
+    on = run_sequence(seq, "relnav")
+    off = run_sequence(seq, "relnav", jitter_starts=0)
+    e_on = _rotation_step_errors_deg(on.online_poses, seq.gt_poses)
+    e_off = _rotation_step_errors_deg(off.online_poses, seq.gt_poses)
+    assert np.sqrt(np.mean(e_on**2)) < np.sqrt(np.mean(e_off**2))  # 0.28 vs 0.30° measured

@@ -155,6 +155,8 @@ OPTION_RANGES: dict[str, _Range] = {
     "jitter_rate": (0, True, 1, True),
     "jitter_max_deg": (0, True, 90, True),
     "jitter_scan_margin": (0, True, None, False),
+    "jitter_starts": (0, True, None, False),
+    "jitter_start_min_deg": (0, True, 90, True),
     "sigma_first_t": (0, False, None, False),
     "sigma_first_r_deg": (0, False, 180, True),
     "noise_floor": (0, False, None, False),

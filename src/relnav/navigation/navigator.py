@@ -58,6 +58,7 @@ from relnav.navigation.gicp import (
 )
 from relnav.navigation.integrity import disagreement, exceedance_probability
 from relnav.navigation.motion import ConstantVelocityFilter
+from relnav.navigation.multistart import rotated_starts
 from relnav.navigation.options import NavigatorConfig, in_map, loop_closer_options
 from relnav.navigation.orbit import OrbitCorrection, correct_azimuth
 from relnav.navigation.pose_graph import LoopCloser
@@ -523,6 +524,11 @@ class Navigator:
         sym = self.symmetry.twist if self.symmetry is not None else None
         Lam_fit = stiffen_prior(Lam, sym, c.symmetry_gain) if sym is not None else Lam
         fit = self._solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
+        sj = math.sqrt(self.motion.jitter_var) if self.motion is not None else 0.0
+        if fit["usable"] and c.jitter_starts > 0 and sj >= math.radians(c.jitter_start_min_deg):
+            for T0 in rotated_starts(T_pred, sj, c.jitter_starts):  # other minima in the jitter
+                alt = self._solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
+                fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
         recovered = False
         if fit["chi2"] > c.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an
@@ -754,6 +760,7 @@ class Navigator:
         primary: bool = True,
         Lam_fit: np.ndarray | None = None,
         voxel_map: VoxelMap | None = None,
+        start: np.ndarray | None = None,
     ) -> dict[str, Any]:
         """One registration onto the map and its quality figures (``rng``: the scan's median
         range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
@@ -766,8 +773,9 @@ class Navigator:
         target = self.map if voxel_map is None else voxel_map
         assert target is not None
         Lf = Lam if Lam_fit is None else Lam_fit
+        T0 = T_pred if start is None else start
         fit = self.register_on_map(
-            P, target.information, T_pred, T_pred, Lf, gate, rng, voxel_map=target
+            P, target.information, T0, T_pred, Lf, gate, rng, voxel_map=target
         )
         repeat_frac, repeated = float("nan"), False
         if voxel_map is None:  # the repeated-points test compares with the navigator's map

@@ -129,6 +129,10 @@ class NavigatorConfig:
         its largest 1σ per axis per step (degrees) and how many times the scan's own rotation
         variance an innovation must exceed to count: white rotation noise of the pose, not of
         the velocity (:meth:`~relnav.navigation.motion.ConstantVelocityFilter.adapt_jitter`).
+    jitter_starts, jitter_start_min_deg : int, float
+        When the learned jitter's 1σ reaches ``jitter_start_min_deg`` (degrees), each scan is
+        registered again from the prediction turned ±1 … ``jitter_starts`` σ about each sensor
+        axis, the best-fitting answer kept (:mod:`relnav.navigation.multistart`; 0 = off).
     min_degeneracy : float
         Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
         information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
@@ -522,6 +526,8 @@ class NavigatorConfig:
     jitter_rate: float = 0.2
     jitter_max_deg: float = 5.0
     jitter_scan_margin: float = 9.0
+    jitter_starts: int = 2
+    jitter_start_min_deg: float = 0.3
     smooth_lag: int = 20
     bootstrap_frames: int = 0
     init_window: int = 10
