@@ -384,6 +384,8 @@ def main() -> None:
                 "vs competitor",
             ):
                 lines.append(f"| {s} | {check} | {so.get(check, '—')} | {sp.get(check, '—')} |")
+            st = score_scenario(ours, tuned_comp, key, None)["vs competitor"]
+            lines.append(f"| {s} | vs competitor (relnav's tuned settings) | {st} | — |")
         lines.append("")
     (args.docs / "side_by_side.md").write_text("\n".join(lines) + "\n")
     # compact table for the README: T_error % mean [min-max] (n), ours | paper
