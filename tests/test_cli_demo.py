@@ -120,3 +120,36 @@ def test_demo_side_by_side_equals_one_after_the_other(tmp_path):
         }, m
         est = [(tmp_path / f"j{j}" / "runs" / m / "estimate.tum").read_text() for j in (1, 2)]
         assert est[0] == est[1]
+
+
+def test_demo_worker_death_is_an_error_not_a_hang(tmp_path):
+    import os
+    import signal
+
+    import pytest
+
+    from relnav.cli.demo import _Workers
+    from relnav.errors import RelnavError
+    from relnav.odometry.presets import resolve_method
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    seq = tmp_path / "seq"
+    simulate(get_preset("sim-voyager", max_frames=4), seq)
+    jobs = [(seq, m, *resolve_method(m), tmp_path / "runs" / m, 0) for m in ("icp-point", "paper1")]
+    workers = _Workers(1)
+
+    class Bar:  # kills the worker at the CLI process's first frame
+        killed = False
+
+        def advance(self, task: object) -> None:
+            if not Bar.killed:
+                Bar.killed = True
+                for p in workers._procs:
+                    os.kill(p.pid, signal.SIGKILL)
+
+    try:
+        with pytest.raises(RelnavError, match="worker process died"):
+            workers.run(jobs, Bar(), {"icp-point": 0, "paper1": 1})
+    finally:
+        workers.close()

@@ -153,6 +153,7 @@ class _Workers:
         ctx = mp.get_context("spawn")
         self.queue = ctx.Queue()
         self.pool = ctx.Pool(n, initializer=_worker_init, initargs=(self.queue,))
+        self._procs = list(getattr(self.pool, "_pool", []))  # the workers, to notice a death
 
     def run(
         self, jobs: list[tuple], bar: Any, tasks: dict[str, Any]
@@ -171,6 +172,15 @@ class _Workers:
             for m, r in pending.items():
                 if m not in results and r.ready():
                     results[m] = r.get()  # re-raises a worker's error here
+            dead = [p.exitcode for p in self._procs if p.exitcode not in (None, 0)]
+            if dead and len(results) < len(jobs):  # its job would never finish: no hang
+                from relnav.errors import RelnavError
+
+                left = ", ".join(m for m in pending if m not in results)
+                raise RelnavError(
+                    f"a demo worker process died (exit code {dead[0]}) while running {left}; "
+                    "rerun with --jobs 1 to run the methods in this process"
+                )
         self._drain(bar, tasks)
         return results
 
