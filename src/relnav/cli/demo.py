@@ -363,6 +363,12 @@ def demo(
         "  time_ms = median per frame; `relnav evaluate --metrics` defines every metric",
         highlight=False,
     )
+    if any(metrics[m]["flagged_frames"] for m in runs):
+        console.print(
+            "  flagged = frames whose step the method did not trust (degenerate, failed or "
+            "suspect: its diagnostics.csv says why per frame)",
+            highlight=False,
+        )
     for m in runs:
         if "smoothed" in metrics[m]:
             sm = metrics[m]["smoothed"]
