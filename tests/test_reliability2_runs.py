@@ -213,7 +213,7 @@ def test_sigkill_at_any_moment_leaves_a_folder_the_next_run_recognises(tmp_path)
     """Kill ``relnav odometry`` while it streams frames and while it writes its last files:
     the folder is either complete (``run.json`` last, no marker) or marked incomplete, and
     the next run says so and replaces it."""
-    n = 120
+    n = 80
     src = tmp_path / "seq"
     r = runner.invoke(app, ["simulate", "sim-voyager", "--max-frames", str(n), "--out", str(src)])
     assert r.exit_code == 0, r.output
