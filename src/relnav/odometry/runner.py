@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -234,19 +235,33 @@ class _RunWriter:
 
         q = matrix_to_quat(np.asarray(pose, dtype=np.float64)[:3, :3]).reshape(4)
         vals = [float(t), *np.asarray(pose, dtype=np.float64)[:3, 3].tolist(), *q.tolist()]
-        self._est.write(" ".join(map(repr, vals)) + "\n")
-        self._csv.writerow(row)
-        self._est.flush()
-        self._diag.flush()
+        with self._naming("estimate"):
+            self._est.write(" ".join(map(repr, vals)) + "\n")
+            self._est.flush()
+        with self._naming("diagnostics"):
+            self._csv.writerow(row)
+            self._diag.flush()
+
+    @contextlib.contextmanager
+    def _naming(self, key: str) -> Iterator[None]:
+        """An OSError without a file name (a failed write or flush: full disk) names the file
+        being written (its final name)."""
+        try:
+            yield
+        except OSError as e:
+            if e.filename is None:
+                e.filename = str(self.paths[key])
+            raise
 
     def close(self) -> None:
         """Fsync and rename the files to their final names (on a failure, e.g. a full disk:
         the temporary files are deleted and the error raised)."""
         try:
-            for f in (self._est, self._diag):
-                f.flush()
-                os.fsync(f.fileno())
-                f.close()
+            for key, f in (("estimate", self._est), ("diagnostics", self._diag)):
+                with self._naming(key):
+                    f.flush()
+                    os.fsync(f.fileno())
+                    f.close()
             for k, p in self.paths.items():
                 os.replace(self._tmp[k], p)
         except BaseException:
