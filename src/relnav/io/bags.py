@@ -321,7 +321,7 @@ class BagSequence:
         self._times = np.array([s for s, _ in stamps], dtype=np.float64)
         self._order = [k for _, k in stamps]  # sorted position → message index in the bag
         self._pos_of = {k: i for i, k in enumerate(self._order)}
-        self._iter: Iterator[tuple[int, Scan]] | None = None
+        self._iter: Iterator[tuple[int, Scan | InputError]] | None = None
         self._ctx: Any = None
         self._next_msg = 0
         self._last: tuple[int, Scan] | None = None  # the scan odometry and a viewer both ask for
