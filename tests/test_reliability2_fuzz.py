@@ -64,13 +64,16 @@ HANG_GUARD_S = 60
 
 STATS: Counter[tuple[str, str]] = Counter()
 """(reader, outcome) -> examples; written to ``$RELNAV_FUZZ_STATS`` (JSON) when set."""
+PEAKS: dict[str, int] = {}
+"""reader -> largest traced memory peak of one read, bytes (written with the stats)."""
 
 
 @pytest.fixture(scope="module", autouse=True)
 def _stats() -> Iterator[None]:
     yield
     if target := os.environ.get("RELNAV_FUZZ_STATS"):
-        rows = {f"{r} {o}": n for (r, o), n in sorted(STATS.items())}
+        rows: dict[str, int] = {f"{r} {o}": n for (r, o), n in sorted(STATS.items())}
+        rows.update({f"{r} peak_bytes": n for r, n in sorted(PEAKS.items())})
         Path(target).write_text(json.dumps(rows, indent=1) + "\n")
 
 
@@ -181,7 +184,7 @@ class _Hang(Exception):
 
 
 @contextlib.contextmanager
-def bounded(size: int) -> Iterator[None]:
+def bounded(size: int, name: str = "") -> Iterator[None]:
     """Measure the tracemalloc peak of the block against the file's size; alarm on a hang;
     any Python warning raised in the block fails the example."""
 
@@ -200,6 +203,7 @@ def bounded(size: int) -> Iterator[None]:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
         peak = tracemalloc.get_traced_memory()[1] - base
+        PEAKS[name] = max(PEAKS.get(name, 0), peak)
         assert peak <= MEMORY_FLOOR + MEMORY_PER_BYTE * size, (
             f"{peak} bytes for a {size}-byte input"
         )
@@ -221,7 +225,7 @@ def check_points(pts: Any) -> None:
 def run_reader(path: Path, data: bytes, read: Callable[[Path], Any], name: str) -> Any:
     """Write ``data`` to ``path`` and read it: the result, or None on a RelnavError."""
     path.write_bytes(data)
-    with bounded(len(data)):
+    with bounded(len(data), name):
         try:
             out = read(path)
         except RelnavError as e:
@@ -407,7 +411,7 @@ def test_decode_pointcloud2_fuzz(traced):
     @PROFILE.__class__(PROFILE, max_examples=PROFILE.max_examples * 5)
     @given(msg=pointcloud2())
     def fuzz(msg: SimpleNamespace) -> None:
-        with bounded(len(msg.data) + 4096):
+        with bounded(len(msg.data) + 4096, "PointCloud2"):
             try:
                 pts = decode_pointcloud2(msg)
             except RelnavError:
