@@ -55,8 +55,9 @@ PROFILE = settings.get_profile(
     "relnav-fuzz-local" if os.environ.get("RELNAV_FUZZ") == "local" else "relnav-fuzz-ci"
 )
 
-MEMORY_FLOOR = 80 << 20
-"""Bytes any read may take whatever the file's size (the LAZ/LZF budgets are 64 MiB)."""
+MEMORY_FLOOR = 16 << 20
+"""Bytes any read may take whatever the file's size (the largest peak seen over 6 000 examples
+was 2.7 MB, a scenario YAML; LAZ files are decompressed in a child process)."""
 MEMORY_PER_BYTE = 200
 """Bytes per file byte a read may take beyond the floor."""
 HANG_GUARD_S = 60
