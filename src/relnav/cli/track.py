@@ -107,10 +107,12 @@ def plot_track_errors(result: Any, path: Path, *, dpi: int = 120) -> Path:
         ax.set_title(f"({tag}) {label}, dotted ±3σ")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-        # scaled to show the errors and the ±3σ bounds (their 95th percentile: an initial
-        # transient of a huge σ may leave the axes, the bounds' level stays visible)
-        finite = np.abs(e[np.isfinite(e)])
-        bounds = 3.0 * np.abs(s[np.isfinite(s)])
+        # scaled to show the errors and the ±3σ bounds after the start-up (the first tenth
+        # of the run, at least the first sample: the initial state and its huge σ may leave
+        # the axes; the 95th percentile keeps the bounds' level visible)
+        k0 = max(1, round(0.1 * len(e))) if len(e) > 2 else 0
+        finite = np.abs(e[k0:][np.isfinite(e[k0:])])
+        bounds = 3.0 * np.abs(s[k0:][np.isfinite(s[k0:])])
         lim = max(
             1.5 * float(np.percentile(finite, 99)) if finite.size else 0.0,
             1.15 * float(np.percentile(bounds, 95)) if bounds.size else 0.0,
