@@ -237,6 +237,10 @@ class Navigator:
             self.motion.start_smoothing(self.config.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
+        c = self.config  # jitter is learned once the model knows the motion
+        self.motion.jitter_rate = (
+            c.jitter_rate if self.n_frames - self._f0 >= c.flag_after_frames else 0.0
+        )
         T_pred, P_pp = self.motion.predict(t)
         if self.attitude is not None:  # the chaser's measured rotation over the step
             T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
@@ -355,7 +359,8 @@ class Navigator:
                     f"probability {p:.2f} (> {c.flag_probability:g}) under its covariance"
                 )
                 return
-        why = disagreement(result, c) if self.n_frames - self._f0 >= c.flag_after_frames else ""
+        settled = self.n_frames - self._f0 >= c.flag_after_frames
+        why = disagreement(result, c) if settled else ""
         if why:
             result.status, result.message = "flagged", why
 
@@ -524,7 +529,7 @@ class Navigator:
         sym = self.symmetry.twist if self.symmetry is not None else None
         Lam_fit = stiffen_prior(Lam, sym, c.symmetry_gain) if sym is not None else Lam
         fit = self._solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
-        sj = math.sqrt(self.motion.jitter_var) if self.motion is not None else 0.0
+        sj = math.sqrt(self.motion.jitter_var) if self.symmetry is None else 0.0  # flat axis
         if fit["usable"] and c.jitter_starts > 0 and sj >= math.radians(c.jitter_start_min_deg):
             for T0 in rotated_starts(T_pred, sj, c.jitter_starts):  # other minima in the jitter
                 alt = self._solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)

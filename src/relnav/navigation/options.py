@@ -128,11 +128,14 @@ class NavigatorConfig:
         The chaser's attitude jitter learned from the rotation innovations (EMA rate; 0 = off),
         its largest 1σ per axis per step (degrees) and how many times the scan's own rotation
         variance an innovation must exceed to count: white rotation noise of the pose, not of
-        the velocity (:meth:`~relnav.navigation.motion.ConstantVelocityFilter.adapt_jitter`).
+        the velocity (:meth:`~relnav.navigation.motion.ConstantVelocityFilter.adapt_jitter`),
+        learned from the ``flag_after_frames``-th frame of the map on (before, the corrections
+        are the model learning the velocity: sim-orion-resample learned 1.5° at frame 4).
     jitter_starts, jitter_start_min_deg : int, float
         When the learned jitter's 1σ reaches ``jitter_start_min_deg`` (degrees), each scan is
         registered again from the prediction turned ±1 … ``jitter_starts`` σ about each sensor
-        axis, the best-fitting answer kept (:mod:`relnav.navigation.multistart`; 0 = off).
+        axis, the best-fitting answer kept (:mod:`relnav.navigation.multistart`; 0 = off); not
+        while the map has a symmetry axis (its cost is flat about it).
     min_degeneracy : float
         Smallest ratio of the extreme eigenvalues of the scan's lever-arm-normalised
         information for an ``ok`` step (below: ``degenerate``, the model keeps the pose).
