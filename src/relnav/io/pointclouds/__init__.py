@@ -244,19 +244,22 @@ def _read_any(path: str | Path) -> _Cloud:
     if not p.is_file():
         raise InputError(f"{p}: no such file")
     _check_magic(p, ext)
-    if ext == ".ply":
-        c = _read_ply(p)
-    elif ext == ".pcd":
-        c = _read_pcd(p)
-    elif ext in _TEXT_EXTENSIONS:
-        c = _read_text(p)
-    elif ext == ".npy":
-        c = _read_npy(p)
-    elif ext == ".bin":
-        c = _read_bin(p)
-    else:
-        c = _read_las(p)
-    return _finalize(p, c)
+    # misread bytes may hold signalling NaNs: their casts to float64 are NaNs like any other
+    # (dropped with a logged warning by _finalize), not a RuntimeWarning on the terminal
+    with np.errstate(invalid="ignore"):
+        if ext == ".ply":
+            c = _read_ply(p)
+        elif ext == ".pcd":
+            c = _read_pcd(p)
+        elif ext in _TEXT_EXTENSIONS:
+            c = _read_text(p)
+        elif ext == ".npy":
+            c = _read_npy(p)
+        elif ext == ".bin":
+            c = _read_bin(p)
+        else:
+            c = _read_las(p)
+        return _finalize(p, c)
 
 
 def _check_magic(p: Path, ext: str) -> None:
