@@ -179,7 +179,9 @@ class _Workers:
                 left = ", ".join(m for m in pending if m not in results)
                 raise RelnavError(
                     f"a demo worker process died (exit code {dead[0]}) while running {left}; "
-                    "rerun with --jobs 1 to run the methods in this process"
+                    "rerun with --jobs 1 to run the methods in this process (a script that "
+                    "calls the demo needs the `if __name__ == '__main__':` guard of spawned "
+                    "processes)"
                 )
         self._drain(bar, tasks)
         return results
