@@ -196,6 +196,14 @@ class PointingSpec(StrictModel):
     up: Vec3 = (0.0, 0.0, 1.0)
     target: Vec3 = (0.0, 0.0, 0.0)
 
+    @field_validator("jitter_deg")
+    @classmethod
+    def _jitter_ok(cls, v: float | Vec3) -> float | Vec3:
+        values = np.atleast_1d(np.asarray(v, dtype=np.float64))
+        if not (np.all(np.isfinite(values)) and np.all(values >= 0)):
+            raise ValueError(f"must be finite and >= 0 (one value or one per axis), got {v!r}")
+        return v
+
 
 class AttitudeSpec(StrictModel):
     """Target attitude motion (see :mod:`relnav.sim.attitude`).
