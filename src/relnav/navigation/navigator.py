@@ -237,10 +237,9 @@ class Navigator:
             self.motion.start_smoothing(self.config.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
-        c = self.config  # jitter is learned once the model knows the motion
-        self.motion.jitter_rate = (
-            c.jitter_rate if self.n_frames - self._f0 >= c.flag_after_frames else 0.0
-        )
+        c = self.config  # jitter is learned once the model knows the motion, unless measured
+        learn = self.n_frames - self._f0 >= c.flag_after_frames and self.attitude is None
+        self.motion.jitter_rate = c.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
         if self.attitude is not None:  # the chaser's measured rotation over the step
             T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
