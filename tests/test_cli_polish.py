@@ -267,10 +267,9 @@ def test_sequence_name_for_titles(tmp_path):
 
 
 def test_evaluate_explains_a_legacy_euler_peak_far_above_the_geodesic_error(tmp_path):
-    import numpy as np
     from scipy.spatial.transform import Rotation
 
-    t, G = _helix(turn=0.0)
+    _, G = _helix(turn=0.0)
     G[:, :3, :3] = Rotation.from_euler("z", 179.99, degrees=True).as_matrix()
     E = G.copy()
     E[:, :3, :3] = Rotation.from_euler("z", -179.99, degrees=True).as_matrix()  # 0.02° away
