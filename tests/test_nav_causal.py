@@ -214,6 +214,7 @@ def test_cli_writes_the_causal_estimate_and_compare_uses_it_by_default(short_orb
     res = runner.invoke(app, ["odometry", str(short_orbit.folder), "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert (out / "estimate_causal.tum").is_file()
+    assert "causal: estimate_causal.tum" in res.output  # the summary shows both
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["causal"]["ape_trans_rmse"] != metrics["ape_trans_rmse"]
     docs = {}

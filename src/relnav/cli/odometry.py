@@ -478,9 +478,19 @@ def _run_into(
     for key in ("e_T_avg", "e_T_max", "drift", "T_error_pct", "e_R_avg", "e_R_max", "e_RT"):
         if key in m:
             table.add_row(key, f"{m[key]:.4g}")
+    for key in ("e_T_avg", "T_error_pct", "e_R_avg"):  # a smoother's run: its online poses too
+        if key in m.get("causal", {}):
+            table.add_row(f"{key} (causal: estimate_causal.tum)", f"{m['causal'][key]:.4g}")
     if (alarms := m.get("state", {}).get("innovation_alarm_frames")) is not None:
         table.add_row("state: innovation alarm (frames)", str(alarms))
     console.print(table)
+    if alarms:
+        console.print(
+            f"[yellow]state: on {alarms} frames the relative state's dynamics could not follow "
+            "its last five innovations (windowed NIS test at 0.999): the navigator's map may be "
+            "sliding there (state.csv, column innovation_alarm)[/]",
+            highlight=False,
+        )
     orbit = run.options.get("finalize", {}).get("orbit")
     if orbit is not None:
         console.print(f"orbit model: {orbit['reason']}", highlight=False)
