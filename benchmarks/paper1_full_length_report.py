@@ -48,24 +48,14 @@ from relnav.bench.paper1_reference import (
     PAPER_DESCRIPTORS,
     PAPER_FILTERS,
     PAPER_SCENARIOS,
+    PART_NAMES,
     TOP_MODULES,
     appendix_table,
     paper_ablation,
 )
 
 SCENARIOS = ("sim-eoi", "sim-helical", "sim-voyager", "sim-orion", "sim-bennu")
-NAMES = {
-    "hods": "HoD-S",
-    "hod": "HoD",
-    "shot": "SHOT",
-    "fpfh": "FPFH",
-    "rops": "RoPS",
-    "trisi": "TriSI",
-    "hinf": "H∞",
-    "kalman": "Kalman",
-    "alphabeta": "αβ",
-    "sdre": "SDRE",
-}
+NAMES = PART_NAMES
 METRICS = ("T_error_pct", "e_R_avg", "e_RT", "time_ms")
 LEDGER = {
     "ledger:own-radius": "each scan its own radius (relnav's former default)",

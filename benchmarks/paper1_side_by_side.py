@@ -22,21 +22,11 @@ from relnav.bench.paper1_reference import (
     PAPER_COMPETITORS,
     PAPER_DESCRIPTORS,
     PAPER_FILTERS,
+    PART_NAMES,
     appendix_table,
 )
 
-NAMES = {
-    "hods": "HoD-S",
-    "hod": "HoD",
-    "shot": "SHOT",
-    "fpfh": "FPFH",
-    "rops": "RoPS",
-    "trisi": "TriSI",
-    "hinf": "H∞",
-    "kalman": "Kalman",
-    "alphabeta": "αβ",
-    "sdre": "SDRE",
-}
+NAMES = PART_NAMES
 KEYS = ("T_error_pct", "e_RT", "time_ms")
 
 

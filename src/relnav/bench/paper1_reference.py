@@ -348,3 +348,18 @@ def _sections() -> dict[str, str]:
 
 def _table_text(name: str) -> str:
     return _sections()[name]
+
+
+PART_NAMES: dict[str, str] = {
+    "hods": "HoD-S",
+    "hod": "HoD",
+    "shot": "SHOT",
+    "fpfh": "FPFH",
+    "rops": "RoPS",
+    "trisi": "TriSI",
+    "hinf": "H∞",
+    "kalman": "Kalman",
+    "alphabeta": "αβ",
+    "sdre": "SDRE",
+}
+"""The paper's names of the descriptors and filters, by relnav's method-string parts."""
