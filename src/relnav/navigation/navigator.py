@@ -237,9 +237,8 @@ class Navigator:
             self.motion.start_smoothing(self.config.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
-        c = self.config  # jitter is learned once the model knows the motion, unless measured
-        learn = self.n_frames - self._f0 >= c.flag_after_frames and self.attitude is None
-        self.motion.jitter_rate = c.jitter_rate if learn else 0.0
+        learn = self._settled() and self.attitude is None  # jitter: unless it is measured
+        self.motion.jitter_rate = self.config.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
         if self.attitude is not None:  # the chaser's measured rotation over the step
             T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
@@ -358,10 +357,14 @@ class Navigator:
                     f"probability {p:.2f} (> {c.flag_probability:g}) under its covariance"
                 )
                 return
-        settled = self.n_frames - self._f0 >= c.flag_after_frames
-        why = disagreement(result, c) if settled else ""
+        why = disagreement(result, c) if self._settled() else ""
         if why:
             result.status, result.message = "flagged", why
+
+    def _settled(self) -> bool:
+        """Whether the motion model has seen ``flag_after_frames`` frames of the map: before,
+        its corrections are it learning the velocity (no jitter learned, no disagreement flag)."""
+        return self.n_frames - self._f0 >= self.config.flag_after_frames
 
     def skip_frame(self, reason: str) -> OdometryStep:
         """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the
@@ -485,7 +488,6 @@ class Navigator:
             np.array([st0] * 3 + [sr0] * 3),
             np.array([sa_t] * 3 + [sa_r] * 3),
         )
-        self.motion.jitter_rate = c.jitter_rate
         self.motion.jitter_max = math.radians(c.jitter_max_deg) ** 2
         self.motion.jitter_scan_margin = c.jitter_scan_margin
         self._rescaled = False
