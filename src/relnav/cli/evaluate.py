@@ -158,9 +158,10 @@ def _trans_rmse(m: Any) -> float:
 
 def _rot_errors_deg(m: Any) -> np.ndarray:
     """Geodesic angle between matched estimated and ground-truth rotations, degrees (K,)."""
-    R = np.einsum("kji,kjl->kil", m.gt_poses[:, :3, :3], m.est_poses[:, :3, :3])
-    c = np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    return np.degrees(np.arccos(c))
+    from relnav.geometry.rotations import angle_between_rotations
+
+    ang = angle_between_rotations(m.gt_poses[:, :3, :3], m.est_poses[:, :3, :3])
+    return np.degrees(np.atleast_1d(ang))
 
 
 def frame_hints(

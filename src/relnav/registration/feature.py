@@ -324,25 +324,18 @@ class FeatureRegistration:
                 info=info,
             )
         t0 = time.perf_counter()
-        if self.match_from == "target":  # paper 1 eq. 5: each feature of P_k to P_{k+1}
-            back = match_descriptors(
-                target.descriptors,
-                source.descriptors,
-                tau=self.tau,
-                mutual=self.mutual,
-                src_keypoints=target.keypoints,
-                tgt_keypoints=source.keypoints,
-            )
-            corr = Correspondences(back.tgt_idx, back.src_idx, back.distance)
-        else:
-            corr = match_descriptors(
-                source.descriptors,
-                target.descriptors,
-                tau=self.tau,
-                mutual=self.mutual,
-                src_keypoints=source.keypoints,
-                tgt_keypoints=target.keypoints,
-            )
+        backward = self.match_from == "target"  # paper 1 eq. 5: each feature of P_k to P_{k+1}
+        a, b = (target, source) if backward else (source, target)
+        corr = match_descriptors(
+            a.descriptors,
+            b.descriptors,
+            tau=self.tau,
+            mutual=self.mutual,
+            src_keypoints=a.keypoints,
+            tgt_keypoints=b.keypoints,
+        )
+        if backward:  # as source → target pairs
+            corr = Correspondences(corr.tgt_idx, corr.src_idx, corr.distance)
         timings["match"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         grouped = self.grouper.select(
