@@ -184,8 +184,10 @@ def test_jitter_is_learned_from_rotation_innovations_beyond_the_scan_margin(rng)
     from relnav.navigation.motion import ConstantVelocityFilter
 
     def learn(sigma_deg, scan_sigma_deg):
-        f = ConstantVelocityFilter(np.eye(4), 0.0, np.full(6, 1e-3), np.full(6, 1e-5))
-        f.jitter_rate, f.jitter_max = 0.2, np.radians(5.0) ** 2
+        f = ConstantVelocityFilter(
+            np.eye(4), 0.0, np.full(6, 1e-3), np.full(6, 1e-5), jitter_max=np.radians(5.0) ** 2
+        )
+        f.jitter_rate = 0.2
         H = np.diag([1e8] * 3 + [1.0 / np.radians(scan_sigma_deg) ** 2] * 3)
         for k in range(1, 200):
             T_pred, _ = f.predict(float(k))

@@ -39,10 +39,22 @@ class ConstantVelocityFilter:
         1σ of the unknown initial velocity, ``[m/s ×3, rad/s ×3]``.
     sigma_acc : (6,) float64
         White-acceleration 1σ: change of the velocity per step, ``[m/s ×3, rad/s ×3]``.
+    jitter_max : float
+        Largest learned attitude-jitter variance, rad² per axis per step (:meth:`adapt_jitter`;
+        learning is off until ``jitter_rate`` is set above 0).
+    jitter_scan_margin : float
+        How many times the scan's own rotation variance a correction must exceed to count as
+        jitter.
     """
 
     def __init__(
-        self, pose: np.ndarray, t0: float, sigma_v0: np.ndarray, sigma_acc: np.ndarray
+        self,
+        pose: np.ndarray,
+        t0: float,
+        sigma_v0: np.ndarray,
+        sigma_acc: np.ndarray,
+        jitter_max: float = 0.0,
+        jitter_scan_margin: float = 9.0,
     ) -> None:
         self.pose = np.array(pose, dtype=np.float64)
         self.t = float(t0)
@@ -62,8 +74,8 @@ class ConstantVelocityFilter:
         self._raw_pred: tuple[np.ndarray, np.ndarray] | None = None
         self.jitter_var = 0.0
         self.jitter_rate = 0.0
-        self.jitter_max = 0.0
-        self.jitter_scan_margin = 9.0
+        self.jitter_max = float(jitter_max)
+        self.jitter_scan_margin = float(jitter_scan_margin)
         self._model_rr = 0.0
         self.step_covariance: np.ndarray | None = None
 

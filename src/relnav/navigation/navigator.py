@@ -487,9 +487,9 @@ class Navigator:
             t,
             np.array([st0] * 3 + [sr0] * 3),
             np.array([sa_t] * 3 + [sa_r] * 3),
+            jitter_max=math.radians(c.jitter_max_deg) ** 2,
+            jitter_scan_margin=c.jitter_scan_margin,
         )
-        self.motion.jitter_max = math.radians(c.jitter_max_deg) ** 2
-        self.motion.jitter_scan_margin = c.jitter_scan_margin
         self._rescaled = False
         self._f0 = self.n_frames
         self._first_sigma = (st0, sr0)
