@@ -126,6 +126,20 @@ def test_streamed_run_equals_in_memory_run(moving_cloud, tmp_path):  # item 16
     assert not list((tmp_path / "st").glob(".*"))
 
 
+def test_streamed_run_keeps_the_steps_sigma(moving_cloud, tmp_path):
+    """errors.png's σ envelope: a streamed run (the CLI's, no steps kept) still has each
+    step's 1σ, equal to the steps' own."""
+    folder, _ = moving_cloud
+    seq = ScanSequence(folder)
+    mem = run_sequence(seq, "relnav")
+    streamed = run_sequence(seq, "relnav", out=tmp_path / "st", keep_steps=False)
+    own = [s.result.info.get("step_sigma_t", np.nan) if s.result else np.nan for s in mem.steps]
+    assert streamed.step_sigma is not None and streamed.step_sigma.shape == (len(seq), 2)
+    np.testing.assert_array_equal(streamed.step_sigma[:, 0], own)
+    assert np.isnan(streamed.step_sigma[0]).all() and np.isfinite(streamed.step_sigma[1:]).any()
+    assert run_sequence(seq, "icp-point").step_sigma is None  # no step covariance: none
+
+
 class _Fixed:
     name = "fixed"
 

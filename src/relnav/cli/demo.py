@@ -82,17 +82,6 @@ class _Trajectory(NamedTuple):
     step_sigma: np.ndarray | None = None
 
 
-def _step_sigma(run: Any) -> np.ndarray | None:
-    """The run's per-frame step 1σ (N, 2) [m, deg] from its steps' info (NaN: none), or None
-    when no step has one."""
-    out = np.full((len(run.poses), 2), np.nan)
-    for k, step in enumerate(getattr(run, "steps", None) or []):
-        info = getattr(getattr(step, "result", None), "info", None) or {}
-        if k < len(out):
-            out[k] = info.get("step_sigma_t", np.nan), info.get("step_sigma_r_deg", np.nan)
-    return out if np.isfinite(out).any() else None
-
-
 def _run_method(
     seq_dir: Path,
     m: str,
@@ -117,7 +106,7 @@ def _run_method(
         smoothed = {k: metrics[k] for k in metrics["causal"] if k in metrics}
         metrics = {**metrics, **metrics.pop("causal"), "smoothed": smoothed}
     poses = np.asarray(run.online_poses)
-    return metrics, _Trajectory(np.asarray(run.timestamps), poses, _step_sigma(run))
+    return metrics, _Trajectory(np.asarray(run.timestamps), poses, run.step_sigma)
 
 
 _QUEUE: Any = None

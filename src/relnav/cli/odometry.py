@@ -182,6 +182,9 @@ def write_run_outputs(
                 {label: m.est_poses},
                 times=m.times,
                 title=f"{label}: error with respect to the ground truth",
+                step_sigmas=(
+                    {label: run.step_sigma[m.idx_est]} if run.step_sigma is not None else None
+                ),
             )
             outputs.append("errors.png")
     frames = state_steps if state_steps is not None else run.steps

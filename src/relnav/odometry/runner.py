@@ -79,6 +79,9 @@ class OdometryRun:
     frame_time_s: np.ndarray | None = field(repr=False, default=None)
     paths: dict[str, Path] = field(default_factory=dict)
     causal_poses: np.ndarray | None = field(repr=False, default=None)
+    #: each frame's step 1σ (N, 2) [translation m, rotation deg] (NaN where a step has none),
+    #: or None when no step has one (trackers without a step covariance)
+    step_sigma: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def online_poses(self) -> np.ndarray:
@@ -396,6 +399,7 @@ def run_sequence(
     used_prior = np.zeros(n, dtype=bool)
     flagged = np.zeros(n, dtype=bool)
     frame_time = np.zeros(n)
+    sigma = np.full((n, 2), np.nan)
     writer = _RunWriter(out) if out is not None else None
     interrupted: int | None = None
     done = 0  # frames estimated and streamed
@@ -417,6 +421,8 @@ def run_sequence(
                 used_prior[i] = step.used_prior
                 flagged[i] = step.status not in ("ok", "first")
                 frame_time[i] = step.time_s
+                info = step.result.info if step.result is not None else {}
+                sigma[i] = info.get("step_sigma_t", np.nan), info.get("step_sigma_r_deg", np.nan)
                 if keep_steps:
                     steps.append(step)
                 if writer is not None:
@@ -435,7 +441,7 @@ def run_sequence(
         if keep_steps:
             del steps[k:]
         times, poses, used_prior = times[:k], poses[:k], used_prior[:k]
-        flagged, frame_time = flagged[:k], frame_time[:k]
+        flagged, frame_time, sigma = flagged[:k], frame_time[:k], sigma[:k]
     except BaseException:
         if writer is not None:
             writer.abort()
@@ -479,6 +485,7 @@ def run_sequence(
         frame_time_s=frame_time,
         paths=paths,
         causal_poses=causal,
+        step_sigma=sigma if np.isfinite(sigma).any() else None,
     )
     if run.n_flagged:
         log.info(
