@@ -1,6 +1,7 @@
-"""Re-anchoring of the navigator's start-up (``reanchor_frame``, :mod:`relnav.navigation.anchor`):
-the gauge error it removes on a tumbling target, its refusal without evidence, the target-frame
-turn handed to the relative state, and option checking."""
+"""Re-anchoring of the navigator's start-up (``reanchor_frame``,
+:mod:`relnav.navigation.startup.anchor`): the gauge error it removes on a tumbling target,
+its refusal without evidence, the target-frame turn handed to the relative state, and option
+checking."""
 
 from __future__ import annotations
 
@@ -68,7 +69,7 @@ def still_seq(tmp_path_factory):
 def _reanchor_record(seq: ScanSequence, **options) -> tuple[dict, object]:
     nav = Navigator(initial_pose=seq.gt_poses[0], **options)
     steps = [nav.register_frame(seq[k]) for k in range(len(seq))]
-    records = [r for r in nav.refinements if r.get("kind") == "reanchor"]
+    records = [r for r in nav.startup.refinements if r.get("kind") == "reanchor"]
     assert len(records) == 1
     return records[0], steps
 

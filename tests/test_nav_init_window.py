@@ -70,8 +70,8 @@ def test_refinement_is_recorded_once_per_pass(orbit_seq):
     nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=4, init_repeat=10)
     for k in range(12):
         nav.register_frame(orbit_seq[k])
-    assert [r["frames"] for r in nav.refinements] == [4, 10]
-    assert nav._win is None  # the buffer is released after the last pass
+    assert [r["frames"] for r in nav.startup.refinements] == [4, 10]
+    assert not nav.startup.open  # the buffer is released after the last pass
     assert nav.finalize().shape == (12, 4, 4)
 
 
@@ -113,7 +113,7 @@ def test_bad_init_options_are_config_errors(options, needle):
 def test_a_refused_refinement_leaves_the_tracked_trajectory(orbit_seq, baseline, monkeypatch):
     """When the joint refinement is less certain than the filter (``init_check``), nothing
     changes: poses equal to the run without the option."""
-    from relnav.navigation import multiview
+    from relnav.navigation.startup import multiview
 
     monkeypatch.setattr(multiview, "_joint_is_surer", lambda *args: False)
     run = run_sequence(orbit_seq, "relnav", init_window=WINDOW, init_solver="joint")
@@ -124,7 +124,7 @@ def test_the_certainty_check_is_recorded(orbit_seq):
     nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=WINDOW, init_solver="joint")
     for k in range(WINDOW):
         nav.register_frame(orbit_seq[k])
-    (rec,) = nav.refinements
+    (rec,) = nav.startup.refinements
     assert isinstance(rec["accepted"], bool)
     assert rec["time_s"] > 0
 
@@ -134,7 +134,7 @@ def test_joint_pair_system_is_the_gauss_newton_system_of_its_cost() -> None:
     direct construction, and ``g`` half the finite-difference gradient of the robust cost in
     the poses' left perturbations (the Gauss–Newton gradient of ``Σ ρ(d²)`` is ``2 Jᵀ W r``)."""
     from relnav.geometry.lie import exp_se3
-    from relnav.navigation.multiview import _pair_system
+    from relnav.navigation.startup.multiview import _pair_system
 
     rng = np.random.default_rng(3)
     n, N = 3, 40
@@ -189,8 +189,8 @@ def test_window_pairs_are_the_nearest_other_frame_point_within_the_gate() -> Non
 
     from scipy.spatial import cKDTree
 
-    from relnav.navigation.multiview import WindowFrame, _window_pairs
     from relnav.navigation.navigator import NavigatorConfig
+    from relnav.navigation.startup.multiview import WindowFrame, _window_pairs
 
     rng = np.random.default_rng(5)
     used = []

@@ -169,8 +169,8 @@ def test_quadric_option_reaches_the_map(rng):
     """``surface="quadric"`` gives the navigator's map curved patches with its reach and
     curvature prior; the default keeps planes."""
     nav = Navigator(surface="quadric", quadric_reach=2.0, curvature_sigma=0.5)
-    nav.spacing0 = 0.4
-    m = nav._new_map()
+    nav.solver.spacing0 = 0.4
+    m = nav.solver.new_map()
     assert m.surface_model == "quadric" and m.quadric_reach == pytest.approx(0.8)
     assert m.curvature_sigma == 0.5
     m.insert(rng.normal(size=(50, 3)), 0)

@@ -166,6 +166,49 @@ class ConstantVelocityFilter:
         self._pred = (T_new, 0.5 * (P_new + P_new.T), t)
         return T_new.copy(), self._pred[1][:6, :6].copy()
 
+    def reset(
+        self,
+        pose: np.ndarray | None = None,
+        velocity: np.ndarray | None = None,
+        *,
+        velocity_covariance: np.ndarray | None = None,
+        widen: np.ndarray | None = None,
+        widen_velocity: np.ndarray | None = None,
+        smooth_lag: int | None = None,
+    ) -> None:
+        """Set the filter's state from evidence outside its own updates (the start-up window's
+        correction, a relocalisation, the second pass over the first frames), in this order:
+
+        Parameters
+        ----------
+        pose : (4, 4) float64, optional
+            The new pose ``T_target_sensor``.
+        velocity : (6,) float64, optional
+            The new body velocity ``[m/s ×3, rad/s ×3]``.
+        velocity_covariance : (6, 6) float64, optional
+            The new velocity covariance (per second²).
+        widen, widen_velocity : (6,) float64, optional
+            1σ added to the predicted pose and velocity (:meth:`widen`; after :meth:`predict`).
+        smooth_lag : int, optional
+            Restart the fixed-lag smoother from here with this lag (:meth:`start_smoothing`).
+        """
+        if pose is not None:
+            self.pose = np.array(pose, dtype=np.float64)
+        if velocity is not None:
+            self.velocity = np.array(velocity, dtype=np.float64)
+        if velocity_covariance is not None:
+            self.P[6:, 6:] = velocity_covariance
+        if widen is not None:
+            self.widen(widen, sigma_velocity=widen_velocity)
+        if smooth_lag is not None:
+            self.start_smoothing(smooth_lag)
+
+    def per_second(self, dt: float) -> None:
+        """Turn the velocity's covariance and the white acceleration set up per frame period
+        into per second, with the first frame period ``dt`` (s)."""
+        self.P[6:, 6:] /= dt**2
+        self.sigma_acc = self.sigma_acc / dt
+
     def widen(self, sigma_pose: np.ndarray, sigma_velocity: np.ndarray | None = None) -> None:
         """Add ``sigma_pose²`` (body frame, 6) to the predicted pose covariance, and
         ``sigma_velocity²`` (6, per second; default ``sigma_pose`` per frame period) to the

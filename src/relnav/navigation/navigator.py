@@ -42,20 +42,11 @@ import time
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from relnav.geometry.lie import exp_se3, log_se3
+from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
-from relnav.navigation import multiview as mv
 from relnav.navigation.attitude_input import AttitudeInput, aided_prediction
-from relnav.navigation.gicp import (
-    ScanToMapFit,
-    degeneracy,
-    left_information,
-    normal_information,
-    solve_scan_to_map,
-    variance_factor,
-)
+from relnav.navigation.gicp import left_information
 from relnav.navigation.integrity import disagreement, exceedance_probability
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.multistart import rotated_starts
@@ -65,6 +56,8 @@ from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
 from relnav.navigation.revisit_check import RevisitCheck
+from relnav.navigation.solver import MapSolver, point_spacing, rms_radius
+from relnav.navigation.startup import StartupCorrection, StartupWindow
 from relnav.navigation.symmetry import (
     SymmetryAxis,
     marginalise_direction,
@@ -80,18 +73,6 @@ from relnav.scan import Scan
 __all__ = ["Navigator", "NavigatorConfig", "exceedance_probability"]
 
 log = logging.getLogger(__name__)
-
-
-def _rms_radius(P: np.ndarray) -> float:
-    """RMS distance of the points from their centroid (m): the scan's lever arm."""
-    return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
-
-
-def _spacing(P: np.ndarray) -> float:
-    """Median nearest-neighbour distance of a cloud (m)."""
-    d, _ = cKDTree(P).query(P, k=2)
-    s = float(np.median(d[:, 1]))
-    return s if s > 0 else float(np.mean(d[:, 1]))
 
 
 class Navigator:
@@ -122,11 +103,9 @@ class Navigator:
         self.config = NavigatorConfig(**options)
         self.attitude = attitude
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
-        self.map: VoxelMap | None = None
-        self.full_scan = np.zeros((0, 3))  # the frame's finite points before the point budget
-        self.repeats = RepeatedPoints(self)
+        self.repeats = RepeatedPoints(self.config)
+        self.solver = MapSolver(self.config, self.repeats)  # holds the map
         self.motion: ConstantVelocityFilter | None = None
-        self.spacing0 = float("nan")
         self.n_frames = 0
         self._online: list[np.ndarray] = []
         self._times: list[float] = []  # each online pose's time, s
@@ -140,18 +119,26 @@ class Navigator:
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
         self.loop_closer: LoopCloser | None = None
         self.revisits: RevisitCheck | None = None
-        self.relocalizer = Relocalizer(self) if self.config.relocalise else None
-        c = self.config
-        mv.check_window_options(c)
-        self._win: list[mv.WindowFrame] | None = (
-            [] if c.init_window > 0 or c.reanchor_frame > 0 else None
-        )
-        self._win_due = sorted({c.init_window, c.init_repeat, c.reanchor_frame} - {0})
-        self._prefix: list[np.ndarray] = []
-        self.refinements: list[dict[str, Any]] = []
+        self.relocalizer = self._new_relocalizer()
+        self.startup = StartupWindow(self.config)
+        self._prefix: list[np.ndarray] = []  # the start-up window's corrected earlier poses
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit_mean_motion
+
+    @property
+    def map(self) -> VoxelMap | None:
+        """The model of the target (target frame), None before the first usable frame."""
+        return self.solver.map
+
+    @property
+    def spacing0(self) -> float:
+        """The first usable scan's point spacing ``s₀`` (m), NaN before it."""
+        return self.solver.spacing0
+
+    def _new_relocalizer(self) -> Relocalizer | None:
+        c = self.config
+        return Relocalizer(c, self.solver, self._initial_pose[:3, 3]) if c.relocalise else None
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -164,13 +151,13 @@ class Navigator:
         P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
-        self.full_scan = P
+        self.repeats.set_scan(P, self.n_frames)
         P, _ = reduce_to_budget(P, self.config.max_points, seed=[0, self.n_frames])
         K = self.config.bootstrap_frames
         if self._boot is not None:
-            self._boot.append((P, t, n_raw, self.full_scan))
+            self._boot.append((P, t, n_raw, self.repeats.full_scan))
         out = self._track(P, t, n_raw, t_start)
-        mv.window_step(self, P, t, out)
+        self._startup_step(P, t, out)
         out = self._observe_loops(P, out)
         if self._boot is not None and len(self._boot) > K and self._rescaled:
             out = self._bootstrap(out)
@@ -190,18 +177,18 @@ class Navigator:
         frames, self._boot = self._boot, None
         v = self.motion.velocity.copy()
         P_vv = 4.0 * self.motion.P[6:, 6:].copy()
-        self.map, self.motion = None, None
+        self.motion = None
         self.pose = self._initial_pose.copy()
         self.n_frames, self._online, self._times, self._rescaled = 0, [], [], False
         self._boot_velocity = (v, P_vv)
         self.loop_closer, self.revisits = None, None
         self.symmetry, self._sym_count = None, 0
-        self.repeats = RepeatedPoints(self)
-        if self.relocalizer is not None:
-            self.relocalizer = Relocalizer(self)
+        self.repeats = RepeatedPoints(self.config)
+        self.solver = MapSolver(self.config, self.repeats)  # no map: the first frame builds it
+        self.relocalizer = self._new_relocalizer()
         out = last
         for P, t, n_raw, full in frames:
-            self.full_scan = full  # the frame's own scan for the repeated-point refinement
+            self.repeats.set_scan(full, self.n_frames)  # the repeated-point refinement's scan
             out = self._observe_loops(P, self._track(P, t, n_raw, time.perf_counter()))
         self._boot_velocity = None
         return OdometryStep(
@@ -228,11 +215,10 @@ class Navigator:
         if not self._rescaled:  # per-frame sigmas → per second, with the first frame period
             dt = t - self.motion.t
             if np.isfinite(dt) and dt > 0:
-                self.motion.P[6:, 6:] /= dt**2
-                self.motion.sigma_acc = self.motion.sigma_acc / dt
+                self.motion.per_second(dt)
             if self._boot_velocity is not None:  # second pass of the first frames
-                self.motion.velocity = self._boot_velocity[0].copy()
-                self.motion.P[6:, 6:] = self._boot_velocity[1]
+                v, P_vv = self._boot_velocity
+                self.motion.reset(velocity=v, velocity_covariance=P_vv)
             self._rescaled = True
             self.motion.start_smoothing(self.config.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
@@ -242,7 +228,7 @@ class Navigator:
         T_pred, P_pp = self.motion.predict(t)
         if self.attitude is not None:  # the chaser's measured rotation over the step
             T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
-        self.repeats.observe_rays(P)
+        self.repeats.observe_rays(P, self.spacing0)
         try:
             result = self._register(P, T_pred, P_pp, timings)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
@@ -252,12 +238,14 @@ class Navigator:
             )
         if self.relocalizer is not None:
             try:
-                result = self.relocalizer.check(P, T_pred, result, timings)
+                result = self.relocalizer.check(P, T_pred, result, timings, self.n_frames)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
                 # never lose a frame to the relocaliser: the step keeps its own judgement
                 log.warning(
                     "frame %d: relocalisation raised %s: %s", self.n_frames, type(e).__name__, e
                 )
+        if result.info.get("relocalised"):
+            self._reset_for_relocalisation()
         used_prior = result.status != "ok"
         keep_fit = result.status == "degenerate" and bool(result.info.get("keep_fit"))
         if keep_fit:  # an unstable step keeps its better-fitting answer; the map is not updated
@@ -265,7 +253,7 @@ class Navigator:
             self.pose = self.motion.pose.copy()
         elif result.status == "ok":
             if result.info.get("recovered"):
-                st, sr = self._first_sigma
+                st, sr = self.solver.first_sigma
                 self.motion.widen(np.array([st] * 3 + [sr] * 3))
             self.motion.update(result.T_target_source, result.info["information"])
             if self.config.adaptive_noise:
@@ -275,7 +263,7 @@ class Navigator:
             Pm = even_subset(P, self.config.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             result.info["merged"] = True  # in the map, whatever label the integrity check adds
-            self.repeats.remember(self.full_scan, self.pose, self.n_frames)
+            self.repeats.remember(self.repeats.full_scan, self.pose)
             self._update_symmetry()
             timings["map"] = time.perf_counter() - ts
         else:
@@ -296,6 +284,52 @@ class Navigator:
             n_raw,
             time.perf_counter() - t_start,
         )
+
+    def _startup_step(self, P: np.ndarray | None, t: float, out: OdometryStep) -> None:
+        """The start-up window's turn (:class:`~relnav.navigation.startup.StartupWindow`):
+        record the frame just tracked and apply its correction when one is due; the time it
+        takes is added to the frame's."""
+        if not self.startup.open or self.map is None:
+            return
+        assert self.motion is not None
+        ts = time.perf_counter()
+        age = self.n_frames - self._f0
+        correction = self.startup.observe(
+            self.n_frames - 1, t, self.pose, P, out, age, self.solver, self.motion
+        )
+        if correction is not None:
+            self._apply_startup(correction)
+        out.time_s += time.perf_counter() - ts
+
+    def _apply_startup(self, correction: StartupCorrection) -> None:
+        """Make the start-up window's corrected poses the navigator's: the map rebuilt from
+        them, the filter going on from the last one (the smoother restarted there), the last
+        scan remembered at its new pose and the earlier poses kept for :meth:`finalize`."""
+        assert self.motion is not None
+        new_map = self.solver.new_map()
+        for Pm, T, frame in correction.map_frames:
+            new_map.insert(Pm @ T[:3, :3].T + T[:3, 3], frame)
+        self.solver.map = new_map
+        self.motion.reset(correction.pose, correction.velocity, smooth_lag=self.config.smooth_lag)
+        self.pose = self.motion.pose.copy()
+        self.repeats.remember(self.repeats.full_scan, self.pose)
+        self._prefix = correction.earlier_poses
+        if self.relocalizer is not None:
+            self.relocalizer.map_changed()
+
+    def _reset_for_relocalisation(self) -> None:
+        """Reset the motion filter before it takes a relocalised pose: the pose's covariance
+        is widened by the first frame's (the filter then takes the verified pose as it is) and
+        the velocity's as ``reloc_velocity`` says: ``keep`` (kept, 1σ widened by 10 × the white
+        acceleration), ``zero`` (restarted: zero, the first frame's 1σ) or ``widen`` (kept,
+        the first frame's 1σ, as a recovered step)."""
+        c, m = self.config, self.motion
+        assert m is not None
+        st, sr = self.solver.first_sigma
+        first = np.array([st] * 3 + [sr] * 3)
+        sv = 10.0 * m.sigma_acc if c.reloc_velocity == "keep" else first / max(self._last_dt, 1e-9)
+        zero = np.zeros(6) if c.reloc_velocity == "zero" else None
+        m.reset(velocity=zero, widen=first, widen_velocity=sv)
 
     def _update_symmetry(self) -> None:
         """Test the map for an axis of rotational symmetry every ``symmetry_every`` accepted
@@ -396,30 +430,8 @@ class Navigator:
             time.perf_counter() - t0,
         )
         t = self.motion.t if self.motion is not None else float(self.n_frames - 1)
-        mv.window_step(self, None, t, out)
+        self._startup_step(None, t, out)
         return self._observe_loops(None, out)
-
-    def _map_options(self) -> dict[str, Any]:
-        """The navigator's patch and weighting parameters of a :class:`VoxelMap` (metres from
-        the multiples of ``s₀``), shared by its map and the pose graph's keyframe maps."""
-        c, s0 = self.config, self.spacing0
-        return {
-            "max_weight": c.max_voxel_weight,
-            "noise_floor": c.noise_floor * s0,
-            "inplane_sigma": c.inplane_sigma * s0,
-            "k_neighbors": c.k_neighbors,
-            "nonplanar_gain": c.nonplanar_gain,
-            "surface": c.surface,
-            "curvature_sigma": c.curvature_sigma,
-            "quadric_reach": c.quadric_reach * s0,
-        }
-
-    def _new_map(self) -> VoxelMap:
-        """An empty map with the navigator's parameters (voxel ``voxel_factor · s₀``)."""
-        c = self.config
-        return VoxelMap(
-            c.voxel_factor * self.spacing0, max_voxels=c.max_voxels, **self._map_options()
-        )
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
         """Record the frame for the pose graph (``loop_closure``) and the revisit test
@@ -432,9 +444,9 @@ class Navigator:
         if self.loop_closer is None:
             self.loop_closer = LoopCloser(
                 self.map.voxel_size,
-                self._map_options(),
+                self.solver.map_options(),
                 **loop_closer_options(c),
-                fallback_sigma=self._first_sigma,
+                fallback_sigma=self.solver.first_sigma,
             )
             if c.revisit_alarm_chi2 > 0:
                 self.revisits = RevisitCheck(self.loop_closer, c.revisit_alarm_chi2)
@@ -470,13 +482,13 @@ class Navigator:
                 n_raw,
                 time.perf_counter() - t_start,
             )
-        self.spacing0 = _spacing(P)
-        self.map = self._new_map()
+        self.solver.spacing0 = point_spacing(P)
+        self.solver.map = self.solver.new_map()
         Pm = even_subset(P, c.max_map_points)
-        self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-        self.repeats.remember(self.full_scan, self.pose, self.n_frames)
-        self.repeats.observe_rays(P)
-        st0 = c.sigma_first_t * max(_rms_radius(P), self.spacing0)
+        self.solver.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+        self.repeats.remember(self.repeats.full_scan, self.pose)
+        self.repeats.observe_rays(P, self.spacing0)
+        st0 = c.sigma_first_t * max(rms_radius(P), self.spacing0)
         sr0 = math.radians(c.sigma_first_r_deg)
         sa_t = c.sigma_acc_t * self.spacing0
         sa_r = math.radians(c.sigma_acc_r_deg)
@@ -492,7 +504,7 @@ class Navigator:
         )
         self._rescaled = False
         self._f0 = self.n_frames
-        self._first_sigma = (st0, sr0)
+        self.solver.first_sigma = (st0, sr0)
         return OdometryStep(
             self.pose.copy(),
             np.eye(4),
@@ -519,7 +531,7 @@ class Navigator:
             )
         ts = time.perf_counter()
         rng = float(np.median(np.linalg.norm(P, axis=1)))
-        radius = max(_rms_radius(P), self.spacing0)
+        radius = max(rms_radius(P), self.spacing0)
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
         Lam = left_information(T_pred, P_pp)
         v = self.map.voxel_size
@@ -529,20 +541,21 @@ class Navigator:
         ts = time.perf_counter()
         sym = self.symmetry.twist if self.symmetry is not None else None
         Lam_fit = stiffen_prior(Lam, sym, c.symmetry_gain) if sym is not None else Lam
-        fit = self._solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
+        solver = self.solver
+        fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         sj = math.sqrt(self.motion.jitter_var) if self.symmetry is None else 0.0  # flat axis
         if fit["usable"] and c.jitter_starts > 0 and sj >= math.radians(c.jitter_start_min_deg):
             for T0 in rotated_starts(T_pred, sj, c.jitter_starts):  # other minima in the jitter
-                alt = self._solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
+                alt = solver.solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
                 fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
         recovered = False
         if fit["chi2"] > c.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an
             # over-confident velocity) or the registration? Register again under the first
             # frame's weak prior; keep that answer only if the scan supports it as well.
-            weak = self._weak_prior(T_pred)
-            gate_w = float(max(gate, 3.0 * self._first_sigma[0]))
-            alt = self._solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
+            weak = solver.weak_prior(T_pred)
+            gate_w = float(max(gate, 3.0 * solver.first_sigma[0]))
+            alt = solver.solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
             if (
                 alt["usable"]
                 and alt["cond"] >= c.min_degeneracy
@@ -555,7 +568,7 @@ class Navigator:
         if c.stability_check and fit["usable"]:
             ts = time.perf_counter()
             Lam_s = Lam if recovered else Lam_fit
-            fit, unstable = self._stability(P, fit, T_pred, Lam_s, gate, rng, radius, info)
+            fit, unstable = solver.stability(P, fit, T_pred, Lam_s, gate, rng, radius, info)
             timings["stability"] = time.perf_counter() - ts
         T, H = fit["T"], fit["H"] / fit["var_factor"]
         if sym is not None:  # the symmetric rotation is the motion model's
@@ -620,206 +633,7 @@ class Navigator:
                 f"(> {c.stability_gate})",
             )
             info["keep_fit"] = c.stability_pose == "fit"
-        return self.fit_result(fit, T, H, Lam, status, message, timings, info)
-
-    def fit_result(
-        self,
-        fit: dict[str, Any],
-        T: np.ndarray,
-        H: np.ndarray,
-        prior: np.ndarray,
-        status: str,
-        message: str,
-        timings: dict[str, float],
-        info: dict[str, Any],
-    ) -> RegistrationResult:
-        """The step's :class:`RegistrationResult` from a registration ``fit`` (:meth:`_solve`):
-        pose ``T``, covariance ``(H + prior)⁻¹`` of the scan's information ``H`` and the
-        prior's (left twist, target frame; ``None`` when singular)."""
-        try:
-            cov = np.linalg.inv(H + prior)
-        except np.linalg.LinAlgError:
-            cov = None
-        return RegistrationResult(
-            T_target_source=T,
-            covariance=cov,
-            fitness=fit["fitness"],
-            inlier_rmse=fit["rms"],
-            n_correspondences=int(fit["n_pairs"]),
-            n_inliers=int(fit["n_inliers"]),
-            converged=fit["iterations"] < self.config.max_iter,
-            status=status,  # type: ignore[arg-type]
-            timings=timings,
-            message=message,
-            info=info,
-        )
-
-    def _stability(
-        self,
-        P: np.ndarray,
-        fit: dict[str, Any],
-        T_pred: np.ndarray,
-        Lam: np.ndarray,
-        gate: float,
-        rng: float,
-        radius: float,
-        info: dict[str, Any],
-    ) -> tuple[dict[str, Any], bool]:
-        """Register ``P`` again from the answer ``fit`` displaced along its weakest direction.
-
-        **[interpretation]** A step whose answer depends on where the solver starts is not
-        determined by the scan. The weakest direction is the smallest eigenvector of the
-        answer's information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled
-        by the lever arm ``radius`` (m); the start is displaced by ``stability_k`` σ along it,
-        at most ``stability_cap`` map voxels (metres of translation, or of arc at ``radius``).
-        The second answer goes through the same point-to-point refinement on repeated points
-        as the first. The answers' distance is measured in the same information (σ). Returns the
-        better-fitting answer (lower robust RMS, the first on ties) and whether the distance
-        exceeds ``stability_gate``.
-        """
-        c = self.config
-        assert self.map is not None
-        H_post = fit["H"] / fit["var_factor"] + Lam
-        H_post = 0.5 * (H_post + H_post.T)
-        sc = np.array([1.0, 1.0, 1.0, radius, radius, radius])  # y = sc * ξ, metres
-        Hs = H_post / sc[:, None] / sc[None, :]
-        ev, U = np.linalg.eigh(Hs)
-        if not np.all(np.isfinite(ev)) or ev[0] <= 0:
-            return fit, False
-        sig_w = 1.0 / math.sqrt(float(ev[0]))
-        shift = min(c.stability_k * sig_w, c.stability_cap * self.map.voxel_size)
-        xi0 = U[:, 0] * shift / sc
-        T0 = exp_se3(xi0) @ fit["T"]
-        T_c = exp_se3(xi0) @ T_pred if c.stability_mode == "prior" else T_pred
-        alt = self.register_on_map(
-            P, self.map.information, T0, T_c, Lam, gate, rng, kernel_scale=c.stability_kernel
-        )
-        # the same pipeline as the first answer: refined point to point on repeated points
-        alt, _, _ = self.repeats.apply(P, alt, T_c, Lam, gate, rng, False)
-        d = log_se3(alt.T @ invert(fit["T"]))
-        dist = math.sqrt(max(float(d @ H_post @ d), 0.0))
-        rms_alt = alt.rms
-        info.update(
-            stability_distance=dist,
-            stability_start_sigma=shift / sig_w,
-            stability_start=shift,
-            stability_follow=dist / max(math.sqrt(float(xi0 @ H_post @ xi0)), 1e-300),
-            stability_shift=d.copy(),
-            stability_rms=rms_alt,
-        )
-        unstable = dist > c.stability_gate
-        if unstable and rms_alt < fit["rms"]:
-            fit = dict(fit, T=alt.T, rms=rms_alt)
-        return fit, unstable
-
-    def _weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
-        """Information (left, target frame) of the first frame's weak motion prior."""
-        st, sr = self._first_sigma
-        return left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
-
-    def register_on_map(
-        self,
-        P: np.ndarray,
-        info: np.ndarray,
-        T0: np.ndarray,
-        T_pred: np.ndarray,
-        Lam: np.ndarray,
-        gate: float,
-        rng: float,
-        kernel_scale: float = 1.0,
-        voxel_map: VoxelMap | None = None,
-    ) -> ScanToMapFit:
-        """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
-        per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
-        Lam)`` (left twist information, target frame); ``gate`` the pair gate (m), ``rng`` the
-        scan's median range (m, for the rotation tolerance); ``voxel_map`` another map than
-        the navigator's (its information is then ``info``). The solver's options come from the
-        configuration (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
-        c = self.config
-        target = self.map if voxel_map is None else voxel_map
-        assert target is not None
-        v = target.voxel_size
-        return solve_scan_to_map(
-            P,
-            target,
-            np.ascontiguousarray(T0),
-            np.ascontiguousarray(T_pred),
-            np.ascontiguousarray(Lam),
-            gate,
-            float(c.kernel) * kernel_scale,
-            int(c.max_iter),
-            c.tolerance * v,
-            c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start) * kernel_scale,
-            decay=float(c.kernel_decay),
-            information=info,
-        )
-
-    def _solve(
-        self,
-        P: np.ndarray,
-        T_pred: np.ndarray,
-        Lam: np.ndarray,
-        gate: float,
-        rng: float,
-        radius: float,
-        primary: bool = True,
-        Lam_fit: np.ndarray | None = None,
-        voxel_map: VoxelMap | None = None,
-        start: np.ndarray | None = None,
-    ) -> dict[str, Any]:
-        """One registration onto the map and its quality figures (``rng``: the scan's median
-        range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
-        under the motion model's prior). With ``repeat_refine`` the answer is refined point to
-        point when the scan repeats the previous scan's surface points
-        (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the
-        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
-        ``voxel_map``: register onto that map instead of the navigator's."""
-        c = self.config
-        target = self.map if voxel_map is None else voxel_map
-        assert target is not None
-        Lf = Lam if Lam_fit is None else Lam_fit
-        T0 = T_pred if start is None else start
-        fit = self.register_on_map(
-            P, target.information, T0, T_pred, Lf, gate, rng, voxel_map=target
-        )
-        repeat_frac, repeated = float("nan"), False
-        if voxel_map is None:  # the repeated-points test compares with the navigator's map
-            fit, repeat_frac, repeated = self.repeats.apply(P, fit, T_pred, Lf, gate, rng, primary)
-        n = len(P)
-        if c.information == "normal":
-            H_cov = normal_information(
-                P,
-                fit.T,
-                fit.idx,
-                fit.d2,
-                target.normals,
-                target.information,
-                target.inplane_sigma**2,
-                float(c.kernel) ** 2,
-            )
-        else:
-            H_cov = fit.H
-        has = fit.d2 >= 0
-        inl = has & (fit.d2 < 9.0)
-        xi = log_se3(fit.T @ invert(T_pred))
-        rms = fit.rms if fit.sw > 0 else float("nan")
-        return {
-            "T": fit.T,
-            "H": H_cov,
-            "n_pairs": fit.n_pairs,
-            "iterations": fit.iterations,
-            "overlap": float(has.sum()) / n,
-            "fitness": float(inl.sum()) / n,
-            "n_inliers": int(inl.sum()),
-            "chi2": float(xi @ Lam @ xi),
-            "cond": degeneracy(H_cov, radius),
-            "rms": rms,
-            "var_factor": variance_factor(rms),
-            "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
-            "repeat_fraction": repeat_frac,
-            "repeated": repeated,
-        }
+        return solver.fit_result(fit, T, H, Lam, status, message, timings, info)
 
     def finalize(self) -> np.ndarray:
         """Poses of every frame so far, smoothed when ``smooth_lag > 0``: ``(N, 4, 4)``.
@@ -859,8 +673,8 @@ class Navigator:
         out: dict[str, Any] = {}
         if self.orbit is not None:
             out["orbit"] = self.orbit.as_dict()
-        if self.refinements:
-            out["start_up"] = [dict(r) for r in self.refinements]
+        if self.startup.refinements:
+            out["start_up"] = [dict(r) for r in self.startup.refinements]
         if self.revisits is not None and self.revisits.checks:
             out["revisits"] = self.revisits.summary()
         if self.attitude is not None:

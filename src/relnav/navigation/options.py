@@ -97,28 +97,28 @@ class NavigatorConfig:
         Multi-view refinement of the first frames (default 10; 0 = off; else at least 3): once
         this many frames are tracked their poses are refined together, the first one fixed,
         then the map is rebuilt and the filter goes on from the refined last pose
-        (:mod:`relnav.navigation.multiview` has the method and the suite's measurements).
+        (:mod:`relnav.navigation.startup.multiview` has the method and the suite's measurements).
     init_rounds, init_gate, init_solver, init_prior, init_prior_scale, init_inplane_sigma :
         Rounds at most; pair gate (× ``s₀``); ``joint`` or ``loo`` solver; ``motion``,
         ``velocity`` or ``weak`` prior and the factor on its 1σ; the joint refinement's
-        in-plane 1σ (× ``s₀``) — see :func:`relnav.navigation.multiview.refine_window`.
+        in-plane 1σ (× ``s₀``) — see :func:`relnav.navigation.startup.multiview.refine_window`.
     init_velocity, init_check, init_repeat :
         The filter's velocity afterwards: its own (``keep``, the default) or the mean of the
         refined last steps (``refined``: the suite's dense presets are lost for some windows,
-        see :mod:`relnav.navigation.multiview`); keep a joint refinement only if it is more
+        see :mod:`relnav.navigation.startup.multiview`); keep a joint refinement only if it is more
         certain of the last pose than the filter; refine once more over the first
         ``init_repeat`` frames (0 = off; more than ``init_window``).
     reanchor_frame, reanchor_skip, reanchor_gate :
         **[interpretation, measured]** Re-anchoring of the start-up
-        (:mod:`relnav.navigation.anchor`; 0 = off, the default): once ``reanchor_frame`` frames
-        are tracked, the first scan is registered onto a map of the frames from
-        ``reanchor_skip`` on, and the track is turned in the target frame so that the first
-        scan sits where that denser map puts it, unless the correction is inconsistent with the
-        start-up steps' covariance plus the registration's own, or does not fit significantly
-        better (both χ²₆ tests at ``reanchor_gate``, default 22.46, the 0.999 quantile). Part of
-        the ``relnav-tumbling`` method preset with ``surface="quadric"``: navigator APE over
-        20 noise seeds, median, voyager-tumble-64 8.55 → 0.63 m, comet-tumble-64 (made after
-        it was frozen) 0.15 → 0.06 m (``docs/navigator.md``, "Re-anchoring the start-up").
+        (:mod:`relnav.navigation.startup.anchor`; 0 = off, the default): once ``reanchor_frame``
+        frames are tracked, the first scan is registered onto a map of the frames from
+        ``reanchor_skip`` on, and the track is turned in the target frame so that the first scan
+        sits where that denser map puts it, unless the correction is inconsistent with the start-up
+        steps' covariance plus the registration's own, or does not fit significantly better (both
+        χ²₆ tests at ``reanchor_gate``, default 22.46, the 0.999 quantile). Part of the
+        ``relnav-tumbling`` method preset with ``surface="quadric"``: navigator APE over 20 noise
+        seeds, median, voyager-tumble-64 8.55 → 0.63 m, comet-tumble-64 (made after it was frozen)
+        0.15 → 0.06 m (``docs/navigator.md``, "Re-anchoring the start-up").
     smooth_lag : int
         Fixed-lag Rauch–Tung–Striebel smoothing of the trajectory over this many frames
         (:meth:`Navigator.finalize`; the per-frame online poses are unchanged); 0 = off.

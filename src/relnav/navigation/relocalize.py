@@ -42,9 +42,8 @@ flagged ``failed`` (pose = prediction, map untouched), at most ``reloc_max_doubt
 RMS stays above a stale median, and a frozen map would never catch up).
 
 An accepted relocalisation returns an ``ok`` result with ``info["relocalised"] = True`` and a
-message; the motion filter is reset at the verified pose first
-(:meth:`Relocalizer._reset_motion`, ``reloc_velocity``), then
-:class:`~relnav.navigation.navigator.Navigator` updates it and inserts the scan into the map.
+message; :class:`~relnav.navigation.navigator.Navigator` resets its motion filter for it
+(``reloc_velocity``), then updates it at the verified pose and inserts the scan into the map.
 ``timings["relocalise"]`` holds each attempt's time. On the navigation suite's 17 unmodified
 sequences and the 4 held-out ones the relocaliser never triggers (same poses with it on and
 off; ``benchmarks/nav_relocalize.py --unmodified``).
@@ -75,7 +74,8 @@ from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
 if TYPE_CHECKING:
-    from relnav.navigation.navigator import Navigator
+    from relnav.navigation.options import NavigatorConfig
+    from relnav.navigation.solver import MapSolver
 
 __all__ = ["DescribedCloud", "Relocalizer", "candidate_poses", "describe", "max_clique"]
 
@@ -365,13 +365,20 @@ class Relocalizer:
 
     Parameters
     ----------
-    nav : Navigator
-        The navigator it serves (its config's ``reloc_*`` fields, map, filter and solver).
+    config : NavigatorConfig
+        The navigator's options (its ``reloc_*`` fields and the solver's acceptance ones).
+    solver : MapSolver
+        The navigator's registration onto its map (the map, ``s₀`` and the weak prior).
+    start_position : (3,) float64
+        The sensor's start position, target frame, m: the viewpoint of the map's description
+        before any step was accepted.
     """
 
-    def __init__(self, nav: Navigator) -> None:
-        get_descriptor(nav.config.reloc_descriptor)  # ConfigError now, not at the first loss
-        self.nav = nav
+    def __init__(self, config: NavigatorConfig, solver: MapSolver, start_position: np.ndarray):
+        get_descriptor(config.reloc_descriptor)  # ConfigError now, not at the first loss
+        self.config = config
+        self.solver = solver
+        self.start_position = np.array(start_position, dtype=float)
         self.lost = 0
         self._doubted = 0
         self._since_attempt = 0
@@ -384,15 +391,25 @@ class Relocalizer:
         self.successes = 0
 
     # ------------------------------------------------------------------ the hook
-    def check(
-        self, P: np.ndarray, T_pred: np.ndarray, result: RegistrationResult, timings: dict
-    ) -> RegistrationResult:
-        """Judge one frame's registration; relocalise when lost or on a suspect jump.
+    def map_changed(self) -> None:
+        """The map was rebuilt (the start-up's refinement): describe it again when needed."""
+        self._map_version += 1
 
-        Returns ``result`` unchanged, a relocalised ``ok`` result, or ``result`` flagged
+    def check(
+        self,
+        P: np.ndarray,
+        T_pred: np.ndarray,
+        result: RegistrationResult,
+        timings: dict,
+        frame: int,
+    ) -> RegistrationResult:
+        """Judge frame ``frame``'s registration; relocalise when lost or on a suspect jump.
+
+        Returns ``result`` unchanged, a relocalised ``ok`` result (``info["relocalised"]``:
+        the navigator resets its motion filter before it takes it), or ``result`` flagged
         ``failed`` (a suspect jump the relocaliser did not confirm).
         """
-        c = self.nav.config
+        c = self.config
         info = result.info
         rms = float(info.get("robust_rms_sigma", float("nan")))
         ref = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
@@ -419,7 +436,7 @@ class Relocalizer:
             if due:
                 self._since_attempt = 0
                 ts = time.perf_counter()
-                found = self._relocalise(P, T_pred, ref, timings)
+                found = self._relocalise(P, T_pred, ref, timings, frame)
                 timings["relocalise"] = time.perf_counter() - ts
                 if found is not None:
                     out = found
@@ -451,26 +468,6 @@ class Relocalizer:
         return out
 
     # ------------------------------------------------------------------ the work
-    def _reset_motion(self) -> None:
-        """Reset the motion filter before it takes a relocalised pose: the pose's covariance
-        is widened by the first frame's (the filter then takes the verified pose as it is) and
-        the velocity's as ``reloc_velocity`` says: ``keep`` (kept, 1σ widened by 10 × the white
-        acceleration), ``zero`` (restarted: zero, the first frame's 1σ) or ``widen`` (kept,
-        the first frame's 1σ, as a recovered step)."""
-        nav, c = self.nav, self.nav.config
-        m = nav.motion
-        assert m is not None
-        st, sr = nav._first_sigma
-        first = np.array([st] * 3 + [sr] * 3)
-        dt = max(nav._last_dt, 1e-9)
-        if c.reloc_velocity == "keep":
-            sv = 10.0 * m.sigma_acc
-        else:
-            sv = first / dt
-            if c.reloc_velocity == "zero":
-                m.velocity = np.zeros(6)
-        m.widen(first, sigma_velocity=sv)
-
     def _ambiguous(
         self, P: np.ndarray, best: dict[str, Any], gate: float, rng: float, radius: float
     ) -> dict[str, Any] | None:
@@ -487,8 +484,7 @@ class Relocalizer:
         ambiguous, and it is not used. Measured on envisat-tumble-64 (50 points per scan): a
         quarter turn fitted with RMS 0.53, the half turn 0.60, the true pose 0.88 (σ units).
         """
-        nav, c = self.nav, self.nav.config
-        assert nav.map is not None
+        c, solver = self.config, self.solver
         T = best["T"]
         X = P @ T[:3, :3].T + T[:3, 3]
         M = self._model_description().points
@@ -504,7 +500,7 @@ class Relocalizer:
                 G[:3, :3] = R
                 G[:3, 3] = cen - R @ cen
                 T0 = G @ T
-                fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius, primary=False)
+                fit = solver.solve(P, T0, solver.weak_prior(T0), gate, rng, radius, primary=False)
                 if not fit["usable"] or not np.all(np.isfinite(fit["T"])):
                     continue
                 dt, dr = _distance(fit["T"], T)
@@ -520,13 +516,13 @@ class Relocalizer:
         """The map's description (cached until the map changes)."""
         if self._model is not None and self._model[0] == self._map_version:
             return self._model[1]
-        nav, c = self.nav, self.nav.config
-        assert nav.map is not None
-        s0 = nav.spacing0
-        M = voxel_downsample(nav.map.means, s0)
+        c, solver = self.config, self.solver
+        assert solver.map is not None
+        s0 = solver.spacing0
+        M = voxel_downsample(solver.map.means, s0)
         views = np.array(self._views[-500:]) if self._views else None
         if views is None:
-            views = nav._initial_pose[:3, 3][None]
+            views = self.start_position[None]
         model = describe(
             M,
             c.reloc_descriptor,
@@ -539,7 +535,7 @@ class Relocalizer:
         return model
 
     def locate(
-        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float | None = None
+        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float | None = None, frame: int = 0
     ) -> tuple[dict[str, Any] | None, str]:
         """Locate the scan ``P`` (sensor frame) on the map; nothing in the navigator changes.
 
@@ -551,6 +547,8 @@ class Relocalizer:
             The motion model's prediction ``T_target_sensor`` (a candidate must fit better).
         ref_rms : float, optional
             Robust RMS of the recent ``ok`` steps (σ units); their median by default.
+        frame : int
+            The frame's index (the scan's description's seed, the log).
 
         Returns
         -------
@@ -560,19 +558,19 @@ class Relocalizer:
         why : str
             What happened (for the log and the step's message).
         """
-        nav, c = self.nav, self.nav.config
-        if nav.map is None or len(P) < c.min_points:
+        c, solver = self.config, self.solver
+        if solver.map is None or len(P) < c.min_points:
             return None, "no map or too few points"
         if ref_rms is None:
             ref_rms = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
-        s0 = nav.spacing0
+        s0 = solver.spacing0
         model = self._model_description()
         scan = describe(
             P,
             c.reloc_descriptor,
             c.reloc_radius * s0,
             max_keypoints=c.reloc_max_scan_points,
-            seed=nav.n_frames,
+            seed=frame,
         )
         cands = candidate_poses(
             scan,
@@ -587,12 +585,12 @@ class Relocalizer:
             return None, "no consistent set of descriptor matches"
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), s0)
-        gate = max(c.reloc_gate * s0, 2.0 * nav.map.voxel_size)
-        pred = nav._solve(P, T_pred, nav._weak_prior(T_pred), gate, rng, radius, primary=False)
+        gate = max(c.reloc_gate * s0, 2.0 * solver.map.voxel_size)
+        pred = solver.solve(P, T_pred, solver.weak_prior(T_pred), gate, rng, radius, primary=False)
         limit = c.reloc_rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc_rms_ratio
         best: dict[str, Any] | None = None
         for T0, support in cands:
-            fit = nav._solve(P, T0, nav._weak_prior(T0), gate, rng, radius, primary=False)
+            fit = solver.solve(P, T0, solver.weak_prior(T0), gate, rng, radius, primary=False)
             ok = (
                 fit["usable"]
                 and np.all(np.isfinite(fit["T"]))
@@ -604,7 +602,7 @@ class Relocalizer:
             log.debug(
                 "frame %d: candidate of %d matches: overlap %.2f fitness %.2f rms %.2f (%s); "
                 "prediction fitness %.2f",
-                nav.n_frames,
+                frame,
                 support,
                 fit["overlap"],
                 fit["fitness"],
@@ -627,30 +625,29 @@ class Relocalizer:
         return best, "verified"
 
     def _relocalise(
-        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float, timings: dict
+        self, P: np.ndarray, T_pred: np.ndarray, ref_rms: float, timings: dict, frame: int
     ) -> RegistrationResult | None:
-        """:meth:`locate`, and the motion filter reset at the verified pose: an ``ok`` result,
-        or None (the reason is logged)."""
-        nav = self.nav
+        """:meth:`locate`: an ``ok`` result at the verified pose, or None (the reason is
+        logged)."""
+        solver = self.solver
         self.attempts += 1
-        best, why = self.locate(P, T_pred, ref_rms)
+        best, why = self.locate(P, T_pred, ref_rms, frame)
         if best is None:
-            log.info("frame %d: no relocalisation (%s)", nav.n_frames, why)
+            log.info("frame %d: no relocalisation (%s)", frame, why)
             return None
-        assert nav.map is not None
+        assert solver.map is not None
         gate = best["gate"]
         self.successes += 1
-        self._reset_motion()
         T, H = best["T"], best["H"] / best["var_factor"]
         info = {
-            "method": nav.name,
+            "method": "relnav",
             "information": H,
             "iterations": best["iterations"],
             "overlap": best["overlap"],
             "chi2_motion": best["chi2"],
             "degeneracy": best["cond"],
             "gate": gate,
-            "map_voxels": len(nav.map),
+            "map_voxels": len(solver.map),
             "robust_rms_sigma": best["rms"],
             "variance_factor": best["var_factor"],
             "recovered": False,
@@ -662,7 +659,7 @@ class Relocalizer:
         log.info(
             "frame %d: relocalised (%d consistent matches, fitness %.2f, %.2f m / %.1f° from "
             "the prediction)",
-            nav.n_frames,
+            frame,
             best["support"],
             best["fitness"],
             jump,
@@ -672,4 +669,4 @@ class Relocalizer:
             f"relocalised against the model ({best['support']} consistent matches, "
             f"{jump:.2f} m / {ang:.1f}° from the prediction)"
         )
-        return nav.fit_result(best, T, H, nav._weak_prior(T), "ok", message, timings, info)
+        return solver.fit_result(best, T, H, solver.weak_prior(T), "ok", message, timings, info)

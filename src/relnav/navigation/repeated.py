@@ -47,17 +47,20 @@ smaller than the noise (1 cm), so repetition is invisible at that scale.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from relnav.geometry.kdtree import _kd_build_select, _kd_query
 from relnav.navigation.gicp import ScanToMapFit
-from relnav.navigation.voxel_map import even_subset
+from relnav.navigation.options import NavigatorConfig
+from relnav.navigation.voxel_map import VoxelMap, even_subset
 
-if TYPE_CHECKING:  # pragma: no cover
-    from relnav.navigation.navigator import Navigator
+Register = Callable[..., ScanToMapFit]
+"""The solver's registration onto the map,
+:meth:`relnav.navigation.solver.MapSolver.register_on_map`: ``(P, information, T0, T_pred, Lam,
+gate, rng) → ScanToMapFit``."""
 
 __all__ = ["PATIENCE", "RAY_FRACTION", "RETEST", "RepeatedPoints"]
 
@@ -72,45 +75,60 @@ class RepeatedPoints:
 
     Parameters
     ----------
-    nav : Navigator
-        The navigator it serves (its ``repeat_refine`` and solver options, map and ``s₀``).
+    config : NavigatorConfig
+        The navigator's options (``repeat_refine``, ``repeat_fraction``, ``repeat_max_points``,
+        ``min_points``).
+
+    Attributes
+    ----------
+    full_scan : (N, 3) float64
+        The frame's finite points before the point budget (sensor frame, m), :meth:`set_scan`.
+    frame : int
+        The frame's index, :meth:`set_scan`.
     """
 
-    def __init__(self, nav: Navigator) -> None:
-        self.nav = nav
+    def __init__(self, config: NavigatorConfig) -> None:
+        self.config = config
+        self.full_scan = np.zeros((0, 3))
+        self.frame = 0
         self.same_rays = False
         self.ray_fraction = float("nan")
         self.misses = 0  # tested frames in a row without repeated points
         self._rays: tuple[np.ndarray, ...] | None = None  # numba KD-tree of the directions
-        self._cloud: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._tree: tuple[int, cKDTree] | None = None
+        self._cloud: tuple[np.ndarray, np.ndarray] | None = None
+        self._tree: cKDTree | None = None
 
-    def observe_rays(self, P: np.ndarray) -> bool:
-        """Record the scan's directions (``P``: sensor frame, m); whether they repeat the
-        previous scan's (see the module doc). Sets :attr:`same_rays` and :attr:`ray_fraction`;
-        nothing is done with ``repeat_refine`` off."""
-        if self.nav.config.repeat_refine <= 0:
+    def set_scan(self, P_full: np.ndarray, frame: int) -> None:
+        """The frame being tracked: its finite points before the point budget (sensor frame,
+        m) and its index."""
+        self.full_scan, self.frame = P_full, int(frame)
+
+    def observe_rays(self, P: np.ndarray, spacing0: float) -> bool:
+        """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m);
+        whether they repeat the previous scan's (see the module doc). Sets :attr:`same_rays`
+        and :attr:`ray_fraction`; nothing is done with ``repeat_refine`` off."""
+        if self.config.repeat_refine <= 0:
             return False
         u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
         self.same_rays = False
         if self._rays is not None and len(P):
             rng = float(np.median(np.linalg.norm(P, axis=1)))
-            eps = 0.01 * self.nav.spacing0 / max(rng, 1e-12)
+            eps = 0.01 * spacing0 / max(rng, 1e-12)
             _, j, _ = _kd_query(*self._rays, u, _EYE, eps, False)
             self.ray_fraction = float(np.count_nonzero(j >= 0)) / len(P)
             self.same_rays = self.ray_fraction >= RAY_FRACTION
         self._rays = _kd_build_select(np.ascontiguousarray(u), 16) if len(P) else None
         return self.same_rays
 
-    def remember(self, P_full: np.ndarray, pose: np.ndarray, frame: int) -> None:
+    def remember(self, P_full: np.ndarray, pose: np.ndarray) -> None:
         """Keep an accepted scan (all its finite points, sensor frame) and its pose
         ``T_target_sensor`` for the next frame's evidence."""
-        self._cloud = (P_full, pose.copy(), frame)
+        self._cloud, self._tree = (P_full, pose.copy()), None
 
     def should_test(self, frame: int) -> bool:
         """Whether to refine this frame (``repeat_refine`` on, rays not repeated, not resting
         after ``PATIENCE`` misses unless the frame is a ``RETEST``-th)."""
-        if self.nav.config.repeat_refine <= 0 or self.same_rays:
+        if self.config.repeat_refine <= 0 or self.same_rays:
             return False
         return self.misses < PATIENCE or frame % RETEST == 0
 
@@ -123,6 +141,9 @@ class RepeatedPoints:
         gate: float,
         rng: float,
         primary: bool,
+        voxel_map: VoxelMap,
+        spacing0: float,
+        register: Register,
     ) -> tuple[ScanToMapFit, float, bool]:
         """The navigator's hook: refine the point-to-plane registration ``fit`` when this
         frame is tested (:meth:`should_test`) and keep the point-to-point answer if the
@@ -137,6 +158,8 @@ class RepeatedPoints:
         primary : bool
             The frame's first registration (under the motion model's prior): only these
             count towards ``PATIENCE``.
+        voxel_map, spacing0, register :
+            The map registered onto, ``s₀`` (m) and the solver's registration onto it.
 
         Returns
         -------
@@ -147,13 +170,23 @@ class RepeatedPoints:
         repeated : bool
             Whether the point-to-point answer was kept.
         """
-        c = self.nav.config
-        if not self.should_test(self.nav.n_frames) or fit.n_pairs < c.min_points:
+        c = self.config
+        if not self.should_test(self.frame) or fit.n_pairs < c.min_points:
             return fit, float("nan"), False
-        full = self.nav.full_scan  # repeated points are exact constraints: use them all,
+        full = self.full_scan  # repeated points are exact constraints: use them all,
         if c.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
             full = even_subset(full, c.repeat_max_points)
-        trial, frac = self.refine(full if len(full) > len(P) else P, fit.T, T_pred, Lam, gate, rng)
+        trial, frac = self.refine(
+            full if len(full) > len(P) else P,
+            fit.T,
+            T_pred,
+            Lam,
+            gate,
+            rng,
+            voxel_map,
+            spacing0,
+            register,
+        )
         repeated = frac >= c.repeat_fraction
         if primary:
             self.misses = 0 if repeated else self.misses + 1
@@ -167,6 +200,9 @@ class RepeatedPoints:
         Lam: np.ndarray,
         gate: float,
         rng: float,
+        voxel_map: VoxelMap,
+        spacing0: float,
+        register: Register,
     ) -> tuple[ScanToMapFit, float]:
         """Point-to-point registration of ``P`` (sensor frame) onto the map from ``T0``, under
         the prior ``(T_pred, Lam)``; and the evidence (:meth:`evidence`) at its answer.
@@ -183,6 +219,8 @@ class RepeatedPoints:
             Pair gate, m.
         rng : float
             The scan's median range, m (rotation tolerance).
+        voxel_map, spacing0, register :
+            The map registered onto, ``s₀`` (m) and the solver's registration onto it.
 
         Returns
         -------
@@ -191,25 +229,23 @@ class RepeatedPoints:
         fraction : float
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
-        nav = self.nav
-        assert nav.map is not None
-        sig = nav.config.repeat_refine * nav.spacing0
-        Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(nav.map), 3, 3)))
-        fit = nav.register_on_map(P, Om, T0, T_pred, Lam, gate, rng)
-        return fit, self.evidence(P, fit.T, sig)
+        sig = self.config.repeat_refine * spacing0
+        Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(voxel_map), 3, 3)))
+        fit = register(P, Om, T0, T_pred, Lam, gate, rng)
+        return fit, self.evidence(P, fit.T, sig, spacing0)
 
-    def evidence(self, P: np.ndarray, T: np.ndarray, sig: float) -> float:
+    def evidence(self, P: np.ndarray, T: np.ndarray, sig: float, spacing0: float) -> float:
         """Fraction of the scan ``P`` (sensor frame, pose ``T``) whose points lie on the ray of
         a point of the previous accepted scan: within ``sig`` (m) of it across the ray and
-        ``s₀`` along it (0 without a previous scan)."""
+        ``spacing0`` (``s₀``, m) along it (0 without a previous scan)."""
         if self._cloud is None or not len(P):
             return 0.0
-        Q, T_prev, key = self._cloud
-        if self._tree is None or self._tree[0] != key:
-            self._tree = (key, cKDTree(Q @ T_prev[:3, :3].T + T_prev[:3, 3]))
-        tree = self._tree[1]
+        Q, T_prev = self._cloud
+        if self._tree is None:
+            self._tree = cKDTree(Q @ T_prev[:3, :3].T + T_prev[:3, 3])
+        tree = self._tree
         X = P @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(X, k=min(4, tree.n), distance_upper_bound=self.nav.spacing0)
+        d, j = tree.query(X, k=min(4, tree.n), distance_upper_bound=spacing0)
         d, j = d.reshape(len(X), -1), j.reshape(len(X), -1)
         ok = np.isfinite(d)
         D = tree.data[np.where(ok, j, 0)] - X[:, None, :]

@@ -169,7 +169,7 @@ class StateRecord:
         as its status says).
     gauge_turn : (4, 4) float64 or None
         The turn ``G`` of the navigator's target frame made at this frame (re-anchoring,
-        :mod:`relnav.navigation.anchor`): the earlier frames' poses are ``G T`` in the frame
+        :mod:`relnav.navigation.startup.anchor`): the earlier frames' poses are ``G T`` in the frame
         of this one's.
     """
 

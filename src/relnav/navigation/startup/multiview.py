@@ -59,66 +59,32 @@ sequences, up to 2.9× on the presets (``nav_suite.py``'s second time ratio).
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
-import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
-from relnav.errors import ConfigError
 from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
 from relnav.geometry.lie import _exp, _log, exp_se3, log_se3
-from relnav.geometry.rotations import angle_between_rotations, rotation_angle
+from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
-from relnav.navigation.options import in_map
-from relnav.navigation.voxel_map import even_subset, plane_information
+from relnav.navigation.voxel_map import plane_information
 
 if TYPE_CHECKING:
-    from relnav.navigation.navigator import Navigator, NavigatorConfig
-    from relnav.odometry.odometry import OdometryStep
+    from relnav.navigation.motion import ConstantVelocityFilter
+    from relnav.navigation.solver import MapSolver
 
 PairMemo = dict[bytes, tuple[np.ndarray, ...]]
 """The window's pairs at the last poses evaluated (:func:`_window_pairs`), by pose bytes: the
 graduated kernel changes the weights, not the pairs."""
 
-__all__ = ["WindowFrame", "check_window_options", "refine_window", "window_step"]
+__all__ = ["WindowFrame", "refine_window"]
 
 log = logging.getLogger(__name__)
-
-
-def check_window_options(c: NavigatorConfig) -> None:
-    """Raise :class:`~relnav.errors.ConfigError` for inconsistent ``init_*`` options."""
-    if c.init_window in (1, 2):
-        raise ConfigError(
-            f"method 'relnav': option init_window={c.init_window} must be 0 (off) or at "
-            "least 3 (an anchor and two frames)"
-        )
-    if c.init_repeat and (c.init_window == 0 or c.init_repeat <= c.init_window):
-        raise ConfigError(
-            f"method 'relnav': option init_repeat={c.init_repeat} must be 0 or more than "
-            f"init_window ({c.init_window})"
-        )
-    if c.reanchor_frame and (
-        c.reanchor_skip < 1
-        or c.reanchor_frame < c.reanchor_skip + 2
-        or c.reanchor_frame in (c.init_window, c.init_repeat)
-        or c.bootstrap_frames
-    ):
-        raise ConfigError(
-            f"method 'relnav': option reanchor_frame={c.reanchor_frame} must be 0 (off) or at "
-            f"least reanchor_skip + 2 ({c.reanchor_skip} + 2, reanchor_skip >= 1), differ from "
-            "init_window and init_repeat, and exclude bootstrap_frames"
-        )
-    if c.init_window and c.bootstrap_frames:
-        raise ConfigError(
-            "method 'relnav': options init_window and bootstrap_frames exclude each other "
-            "(set init_window=0 to use bootstrap_frames)"
-        )
 
 
 @dataclass
@@ -153,43 +119,13 @@ class WindowFrame:
     step_cov: np.ndarray | None = None
 
 
-def window_step(nav: Navigator, P: np.ndarray | None, t: float, out: OdometryStep) -> None:
-    """Record a tracked frame for the multi-view refinement (``init_window``) and run the
-    refinement when the window is full; its time is added to this frame's."""
-    if nav._win is None or nav.map is None:
-        return
-    # in the map: the first frame and every step merged into it (an integrity label such as
-    # ``degenerate`` over the alert limit does not take a merged scan out of the map)
-    ok = P is not None and in_map(out)
-    f = WindowFrame(nav.n_frames - 1, float(t), nav.pose.copy(), ok)
-    if out.result is not None:
-        f.step_cov = out.result.info.get("step_covariance")
-    if ok:
-        assert P is not None
-        f.P = P
-        f.Pm = even_subset(P, nav.config.max_map_points)
-        f.rng = max(float(np.median(np.linalg.norm(P, axis=1))), 1.0)
-    nav._win.append(f)
-    due = nav.n_frames - nav._f0
-    if due not in nav._win_due:
-        return
-    ts = time.perf_counter()
-    c = nav.config
-    if due in (c.init_window, c.init_repeat):
-        refine_window(nav)
-    if due == c.reanchor_frame:
-        from relnav.navigation.anchor import reanchor  # anchor builds on this module
-
-        G = reanchor(nav)
-        if G is not None and out.result is not None:
-            out.result.info["gauge_turn"] = G  # the earlier frames' poses are G T now
-    out.time_s += time.perf_counter() - ts
-    if nav.n_frames - nav._f0 >= nav._win_due[-1]:
-        nav._win = None
-
-
 def _joint_refine(
-    nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray, memo: PairMemo
+    solver: MapSolver,
+    motion: ConstantVelocityFilter,
+    used: list[WindowFrame],
+    gate: float,
+    sa: np.ndarray,
+    memo: PairMemo,
 ) -> int:
     """Levenberg–Marquardt over the poses of ``used`` but the first (the anchor), with the
     solver's graduated kernel (``kernel_start`` × ``kernel_decay`` per round down to
@@ -201,17 +137,17 @@ def _joint_refine(
     no pose moves by more than a tenth of a voxel (rotation times the scan's range) or the
     damping exceeds 10⁶ (no step lowers the cost).
     """
-    c = nav.config
-    v = nav.map.voxel_size if nav.map is not None else 1.0
+    c = solver.config
+    v = solver.map.voxel_size if solver.map is not None else 1.0
     lam, rounds = 1e-4, 0
     kern = max(float(c.kernel), float(c.kernel_start))
-    H, g, cost = _joint_system(nav, used, gate, kern, sa, memo)
+    H, g, cost = _joint_system(solver, motion, used, gate, kern, sa, memo)
     while rounds < c.init_rounds:
         k_r = max(float(c.kernel), float(c.kernel_start) * float(c.kernel_decay) ** rounds)
         rounds += 1
         if k_r != kern:
             kern = k_r
-            H, g, cost = _joint_system(nav, used, gate, kern, sa, memo)
+            H, g, cost = _joint_system(solver, motion, used, gate, kern, sa, memo)
         A = H[6:, 6:] + lam * np.diag(np.diag(H[6:, 6:]))
         try:
             delta = -np.linalg.solve(A, g[6:])
@@ -225,7 +161,7 @@ def _joint_refine(
             dx = delta[6 * i : 6 * i + 6]
             f.pose = exp_se3(dx) @ f.pose
             moved = max(moved, float(np.linalg.norm(dx[:3]) + np.linalg.norm(dx[3:]) * f.rng))
-        H2, g2, cost2 = _joint_system(nav, used, gate, kern, sa, memo)
+        H2, g2, cost2 = _joint_system(solver, motion, used, gate, kern, sa, memo)
         if cost2 < cost:
             H, g, cost = H2, g2, cost2
             lam = max(lam / 3.0, 1e-7)
@@ -240,7 +176,12 @@ def _joint_refine(
 
 
 def _joint_is_surer(
-    nav: Navigator, used: list[WindowFrame], gate: float, sa: np.ndarray, memo: PairMemo
+    solver: MapSolver,
+    motion: ConstantVelocityFilter,
+    used: list[WindowFrame],
+    gate: float,
+    sa: np.ndarray,
+    memo: PairMemo,
 ) -> bool:
     """Is the joint refinement more certain of the window's last pose than the filter?
 
@@ -253,15 +194,17 @@ def _joint_is_surer(
     (2.6 m against 1.9 m) and sim-orion, the first four being where the refinement made
     the APE worse.
     """
-    H, _, _ = _joint_system(nav, used, gate, float(nav.config.kernel), sa, memo, regular=False)
-    assert nav.motion is not None
+    H, _, _ = _joint_system(
+        solver, motion, used, gate, float(solver.config.kernel), sa, memo, regular=False
+    )
+    assert motion is not None
     try:
         C = np.linalg.inv(H[6:, 6:])[-6:, -6:]
     except np.linalg.LinAlgError:
         return False
     Ad = adjoint(invert(used[-1].pose))  # left (target frame) → body
     C = Ad @ C @ Ad.T
-    P = nav.motion.P[:6, :6]
+    P = motion.P[:6, :6]
 
     def big(M: np.ndarray) -> float:
         return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1])
@@ -270,7 +213,8 @@ def _joint_is_surer(
 
 
 def _joint_system(
-    nav: Navigator,
+    solver: MapSolver,
+    motion: ConstantVelocityFilter,
     used: list[WindowFrame],
     gate: float,
     kern: float,
@@ -291,12 +235,12 @@ def _joint_system(
     :func:`_velocity_terms`). The first frame's weak prior on each pose keeps ``H``
     regular (not in the cost).
     """
-    c = nav.config
+    c = solver.config
     key = b"".join(f.pose.tobytes() for f in used)
     if memo is not None and key in memo:
         Y, lab, Om, a, b = memo[key]
     else:
-        Y, lab, Om, a, b = _window_pairs(nav, used, gate)
+        Y, lab, Om, a, b = _window_pairs(solver, used, gate)
         if memo is not None:
             if len(memo) >= 2:  # the current poses and the last kept ones
                 del memo[next(iter(memo))]
@@ -308,21 +252,21 @@ def _joint_system(
     if c.init_prior in ("motion", "velocity"):
         cost += _motion_terms(used, sa, H, g)
     if c.init_prior == "velocity":
-        assert nav.motion is not None
-        cost += _velocity_terms(used, nav.motion.velocity, nav.motion.P[6:, 6:], H, g)
+        assert motion is not None
+        cost += _velocity_terms(used, motion.velocity, motion.P[6:, 6:], H, g)
     for i, f in enumerate(used):
         if regular:
-            H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += nav._weak_prior(f.pose)
+            H[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += solver.weak_prior(f.pose)
     return H, g, cost
 
 
 def _window_pairs(
-    nav: Navigator, used: list[WindowFrame], gate: float
+    solver: MapSolver, used: list[WindowFrame], gate: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The window's map points at the current poses and their pairs (:func:`_joint_system`):
     ``(Y, lab, Om, a, b)``, the points ``Y`` (N, 3, target frame, m), their frames ``lab``
     (N,), plane information ``Om`` (N, 3, 3) and the pairs ``Y[a] ↔ Y[b]``."""
-    c, s0 = nav.config, nav.spacing0
+    c, s0 = solver.config, solver.spacing0
     n = len(used)
     Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
     lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
@@ -564,7 +508,9 @@ def _neighbour_prior(
     return centre, left_information(centre, S)
 
 
-def refine_window(nav: Navigator) -> None:
+def refine_window(
+    frames: list[WindowFrame], solver: MapSolver, motion: ConstantVelocityFilter
+) -> tuple[int, bool, list[np.ndarray]]:
     """Multi-view refinement of the window's poses, leave-one-out (``init_window``).
 
     **[interpretation]** A step registered onto a map of a few sparse scans, under a motion
@@ -580,25 +526,28 @@ def refine_window(nav: Navigator) -> None:
     refined poses, the filter's pose is the refined one and its velocity its own
     (``init_velocity="keep"``) or the mean of the refined last steps (``"refined"``: half of the
     window's steps, at least two), and the smoother
-    restarts at the last frame: :meth:`Navigator.finalize` returns the refined poses for the window.
+    restarts at the last frame: :meth:`Navigator.finalize` returns the refined poses for the window
+    (:meth:`relnav.navigation.startup.StartupWindow.observe` makes the correction).
+
+    The poses of ``frames`` are refined in place (restored when refused); ``motion`` is read,
+    never written. Returns the rounds run, whether the refinement was accepted and the poses
+    before it.
     """
-    c = nav.config
-    assert nav._win is not None and nav.map is not None and nav.motion is not None
-    t_start = time.perf_counter()
-    frames = nav._win
+    c = solver.config
+    assert solver.map is not None
     used = [f for f in frames if f.ok]
     before = [f.pose.copy() for f in frames]
-    v = nav.map.voxel_size
-    gate = float(max(c.init_gate * nav.spacing0, 2.0 * v))
+    v = solver.map.voxel_size
+    gate = float(max(c.init_gate * solver.spacing0, 2.0 * v))
     rounds, moved = 0, float("inf")
     sa = c.init_prior_scale * np.array(
-        [c.sigma_acc_t * nav.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
+        [c.sigma_acc_t * solver.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
     )
     accepted = True
     if c.init_solver == "joint" and len(used) > 2:
         memo: PairMemo = {}
-        rounds = _joint_refine(nav, used, gate, sa, memo)
-        if c.init_check and not _joint_is_surer(nav, used, gate, sa, memo):
+        rounds = _joint_refine(solver, motion, used, gate, sa, memo)
+        if c.init_check and not _joint_is_surer(solver, motion, used, gate, sa, memo):
             accepted = False
             for f, T0 in zip(frames, before, strict=True):
                 f.pose = T0
@@ -608,10 +557,10 @@ def refine_window(nav: Navigator) -> None:
         rounds += 1
         moved = 0.0
         for i, f in enumerate(used[1:], start=1):
-            T_pr, Lam = f.pose, nav._weak_prior(f.pose)
+            T_pr, Lam = f.pose, solver.weak_prior(f.pose)
             if c.init_prior == "motion":
                 T_pr, Lam = _neighbour_prior(used, i, sa, T_pr, Lam)
-            m = nav._new_map()
+            m = solver.new_map()
             for g in used:
                 if g is not f:
                     m.insert(g.Pm @ g.pose[:3, :3].T + g.pose[:3, 3], g.frame)
@@ -641,92 +590,5 @@ def refine_window(nav: Navigator) -> None:
             moved = max(moved, float(np.linalg.norm(D[:3, 3])) + ang * f.rng)
             f.pose = fit.T.copy()
     if not accepted:
-        nav.refinements.append(
-            {
-                "kind": "multi-view",
-                "frames": len(frames),
-                "rounds": rounds,
-                "accepted": False,
-                "time_s": time.perf_counter() - t_start,
-            }
-        )
         log.debug("multi-view refinement of %d frames refused", len(frames))
-        return
-    out = adopt_window(nav, frames, before)
-    nav.refinements.append(
-        {
-            "kind": "multi-view",
-            "frames": len(frames),
-            "rounds": rounds,
-            "time_s": time.perf_counter() - t_start,
-            "accepted": True,
-            **out,
-        }
-    )
-    log.debug(
-        "multi-view refinement of %d frames: %d rounds, largest rotation %.3f°",
-        len(frames),
-        rounds,
-        out["max_rotation_deg"],
-    )
-
-
-def adopt_window(
-    nav: Navigator, frames: list[WindowFrame], before: list[np.ndarray]
-) -> dict[str, float]:
-    """Make the window's new poses the navigator's (after :func:`refine_window` or
-    :func:`relnav.navigation.anchor.reanchor`): frames outside the map follow the last
-    accepted frame's change, the map is rebuilt from the new poses, the filter goes on from
-    the last one (its velocity its own, or with ``init_velocity="refined"`` the mean of the
-    refined last steps), the smoother restarts at the last frame and
-    :meth:`~relnav.navigation.navigator.Navigator.finalize` returns the new poses for the
-    window's other frames. ``before``: the poses before the change. Returns the largest
-    rotation of a pose (deg) and the χ² of the last pose's and the velocity's change against
-    the filter's covariance.
-    """
-    c = nav.config
-    assert nav.motion is not None
-    used = [f for f in frames if f.ok]
-    # frames outside the map follow the last accepted frame's correction
-    corr = np.eye(4)
-    for f, T0 in zip(frames, before, strict=True):
-        if f.ok:
-            corr = f.pose @ invert(T0)
-        else:
-            f.pose = corr @ f.pose
-    nav.map = nav._new_map()
-    for f in used:
-        nav.map.insert(f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3], f.frame)
-    steps = [
-        log_se3(invert(a.pose) @ b.pose) / (b.t - a.t)
-        for a, b in itertools.pairwise(used)
-        if b.frame == a.frame + 1 and b.t > a.t
-    ]
-    mot = nav.motion
-    xi_last = log_se3(invert(before[-1]) @ frames[-1].pose)
-    try:
-        chi2_p = float(xi_last @ np.linalg.solve(mot.P[:6, :6], xi_last))
-    except np.linalg.LinAlgError:
-        chi2_p = float("nan")
-    mot.pose = frames[-1].pose.copy()
-    chi2_v = float("nan")
-    if steps:
-        v_new = np.mean(steps[-max(2, len(steps) // 2) :], axis=0)
-        dv = v_new - mot.velocity
-        try:
-            chi2_v = float(dv @ np.linalg.solve(mot.P[6:, 6:], dv))
-        except np.linalg.LinAlgError:
-            pass
-        if c.init_velocity == "refined":
-            mot.velocity = v_new
-    nav.pose = mot.pose.copy()
-    nav.repeats.remember(nav.full_scan, nav.pose, nav.n_frames)  # the last scan at its new pose
-    nav._prefix = [f.pose.copy() for f in frames[:-1]]
-    mot.start_smoothing(c.smooth_lag)
-    if nav.relocalizer is not None:
-        nav.relocalizer._map_version += 1
-    shift = [
-        math.degrees(angle_between_rotations(T0[:3, :3], f.pose[:3, :3]))
-        for f, T0 in zip(frames, before, strict=True)
-    ]
-    return {"max_rotation_deg": max(shift), "velocity_chi2": chi2_v, "pose_chi2": chi2_p}
+    return rounds, accepted, before

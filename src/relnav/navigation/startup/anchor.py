@@ -17,8 +17,9 @@ Once ``reanchor_frame`` frames are tracked, the map of the frames from ``reancho
 from its pose under the first frame's weak prior. Its answer ``T₀'`` measures the turn: the whole
 window but the first frame (the anchor) is turned by ``C = T₀ T₀'⁻¹`` in the target frame, frames
 ``1 … reanchor_skip − 1`` by a growing share ``k / reanchor_skip`` of it **[interpretation]**: the
-start-up's error grew over them (:func:`relnav.navigation.multiview.adopt_window` then rebuilds
-the map and restarts the filter and the smoother, as after the multi-view refinement). The
+start-up's error grew over them (the start-up window then rebuilds the map and restarts the
+filter and the smoother, as after the multi-view refinement:
+:class:`relnav.navigation.startup.StartupWindow`). The
 relative state turns every earlier frame by the whole of ``C`` (``StateRecord.gauge_turn``).
 The correction is refused (each test against χ²₆ at ``reanchor_gate``) when it is inconsistent
 with the start-up steps' covariance (frames 1 … ``reanchor_skip``, in the target frame) plus the
@@ -36,7 +37,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,11 +44,11 @@ import numpy as np
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import solve_scan_to_map
-from relnav.navigation.multiview import adopt_window
-from relnav.navigation.navigator import _rms_radius
+from relnav.navigation.solver import rms_radius
 
 if TYPE_CHECKING:
-    from relnav.navigation.navigator import Navigator
+    from relnav.navigation.solver import MapSolver
+    from relnav.navigation.startup.multiview import WindowFrame
 
 __all__ = ["reanchor", "start_up_covariance"]
 
@@ -67,40 +67,40 @@ def start_up_covariance(poses: list[np.ndarray], step_covs: list[np.ndarray | No
     return 0.5 * (C + C.T)
 
 
-def reanchor(nav: Navigator) -> np.ndarray | None:
+def reanchor(
+    frames: list[WindowFrame], solver: MapSolver
+) -> tuple[dict, tuple[np.ndarray, list[np.ndarray], float] | None]:
     """Re-register the window's first scan onto the map of its later frames and turn the window
-    by the correction (see the module doc); records the outcome in ``nav.refinements``
-    (``"kind": "reanchor"``). Returns the turn ``G`` (4, 4) of the target frame applied to the
-    frames after the first ``reanchor_skip`` (the earlier ones take a share of it), or None
-    when refused."""
-    c = nav.config
-    assert nav._win is not None and nav.map is not None and nav.motion is not None
-    t_start = time.perf_counter()
-    frames = nav._win
+    by the correction (see the module doc).
+
+    Returns the outcome's record (``"kind": "reanchor"``, why when refused) and, when accepted,
+    the turn ``G`` (4, 4) of the target frame applied to the frames after the first
+    ``reanchor_skip`` (the earlier ones take a share of it; the poses of ``frames`` are turned
+    in place), the poses before the turn and its angle (deg); None when refused."""
+    c = solver.config
+    assert solver.map is not None
     used = [f for f in frames if f.ok]
     record: dict = {"kind": "reanchor", "frames": len(frames), "accepted": False}
     first = used[0] if used else None
     late = [f for f in used[1:] if first is not None and f.frame - first.frame >= c.reanchor_skip]
     if first is None or len(late) < 2 or not len(first.P):
-        nav.refinements.append(record | {"reason": "too few frames in the map"})
-        return None
-    m = nav._new_map()
+        return record | {"reason": "too few frames in the map"}, None
+    m = solver.new_map()
     for f in late:
         m.insert(f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3], f.frame)
-    st = nav._first_sigma[0]
-    fit = nav._solve(
+    st = solver.first_sigma[0]
+    fit = solver.solve(
         first.P,
         first.pose,
-        nav._weak_prior(first.pose),
+        solver.weak_prior(first.pose),
         3.0 * st,
         first.rng,
-        max(_rms_radius(first.P), nav.spacing0),
+        max(rms_radius(first.P), solver.spacing0),
         primary=False,
         voxel_map=m,
     )
     if not (fit["usable"] and np.all(np.isfinite(fit["T"]))):
-        nav.refinements.append(record | {"reason": "registration unusable"})
-        return None
+        return record | {"reason": "registration unusable"}, None
     xi = log_se3(fit["T"] @ invert(first.pose))  # left twist, target frame
     # the first scan where the start-up put it, on the same map and kernel
     at = solve_scan_to_map(
@@ -136,24 +136,16 @@ def reanchor(nav: Navigator) -> np.ndarray | None:
     }
     if not chi2 <= c.reanchor_gate:
         log.debug("re-anchoring refused: χ² %.1f > %.1f", chi2, c.reanchor_gate)
-        nav.refinements.append(record | {"reason": "inconsistent with the start-up"})
-        return None
+        return record | {"reason": "inconsistent with the start-up"}, None
     if not gain > c.reanchor_gate:
         log.debug("re-anchoring refused: fit gain χ² %.1f <= %.1f", gain, c.reanchor_gate)
-        nav.refinements.append(record | {"reason": "no better fit"})
-        return None
+        return record | {"reason": "no better fit"}, None
     g = log_se3(first.pose @ invert(fit["T"]))
     before = [f.pose.copy() for f in frames]
     for f in frames:
         if f is not first:
             share = min(1.0, (f.frame - first.frame) / c.reanchor_skip)
             f.pose = exp_se3(share * g) @ f.pose
-    out = adopt_window(nav, frames, before)
     angle = math.degrees(float(np.linalg.norm(xi[3:])))
     log.debug("re-anchored the start-up: %.2f° (χ² %.1f)", angle, chi2)
-    nav.refinements.append(
-        record
-        | out
-        | {"accepted": True, "rotation_deg": angle, "time_s": time.perf_counter() - t_start}
-    )
-    return exp_se3(g)
+    return record, (exp_se3(g), before, angle)

@@ -1,0 +1,308 @@
+"""The navigator's registration of a scan onto its map (:class:`MapSolver`).
+
+One registration is robust generalised ICP of the scan onto the map's points under the motion
+model's prior (:func:`~relnav.navigation.gicp.solve_scan_to_map`), optionally refined point to
+point on repeated points (:class:`~relnav.navigation.repeated.RepeatedPoints`), with its quality
+figures (overlap, fitness, χ² against the prior, degeneracy, robust RMS). The navigator, its
+start-up window and its relocaliser all register through one :class:`MapSolver`, so that they
+share the solver's settings and the map without reaching into the navigator.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from relnav.geometry.lie import exp_se3, log_se3
+from relnav.geometry.se3 import invert
+from relnav.navigation.gicp import (
+    ScanToMapFit,
+    degeneracy,
+    left_information,
+    normal_information,
+    solve_scan_to_map,
+    variance_factor,
+)
+from relnav.navigation.options import NavigatorConfig
+from relnav.navigation.repeated import RepeatedPoints
+from relnav.navigation.voxel_map import VoxelMap
+from relnav.registration.result import RegistrationResult
+
+__all__ = ["MapSolver", "point_spacing", "rms_radius"]
+
+
+def rms_radius(P: np.ndarray) -> float:
+    """RMS distance of the points ``P`` (N, 3) from their centroid (m): the scan's lever arm."""
+    return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+
+
+def point_spacing(P: np.ndarray) -> float:
+    """Median nearest-neighbour distance of a cloud ``P`` (N, 3) (m)."""
+    d, _ = cKDTree(P).query(P, k=2)
+    s = float(np.median(d[:, 1]))
+    return s if s > 0 else float(np.mean(d[:, 1]))
+
+
+class MapSolver:
+    """Registration of scans onto the navigator's map with the navigator's solver settings.
+
+    Parameters
+    ----------
+    config : NavigatorConfig
+        The navigator's options (solver, map and repeated-point fields).
+    repeats : RepeatedPoints
+        The repeated-point test and refinement applied to registrations onto :attr:`map`.
+
+    Attributes
+    ----------
+    map : VoxelMap or None
+        The map scans are registered onto (None before the first usable frame).
+    spacing0 : float
+        The first usable scan's point spacing ``s₀`` (m): the unit of the scale-free options.
+    first_sigma : tuple of float
+        The first frame's weak prior, 1σ translation (m) and rotation (rad).
+    """
+
+    def __init__(self, config: NavigatorConfig, repeats: RepeatedPoints) -> None:
+        self.config = config
+        self.repeats = repeats
+        self.map: VoxelMap | None = None
+        self.spacing0 = float("nan")
+        self.first_sigma = (float("nan"), float("nan"))
+
+    def fit_result(
+        self,
+        fit: dict[str, Any],
+        T: np.ndarray,
+        H: np.ndarray,
+        prior: np.ndarray,
+        status: str,
+        message: str,
+        timings: dict[str, float],
+        info: dict[str, Any],
+    ) -> RegistrationResult:
+        """The step's :class:`RegistrationResult` from a registration ``fit`` (:meth:`solve`):
+        pose ``T``, covariance ``(H + prior)⁻¹`` of the scan's information ``H`` and the
+        prior's (left twist, target frame; ``None`` when singular)."""
+        try:
+            cov = np.linalg.inv(H + prior)
+        except np.linalg.LinAlgError:
+            cov = None
+        return RegistrationResult(
+            T_target_source=T,
+            covariance=cov,
+            fitness=fit["fitness"],
+            inlier_rmse=fit["rms"],
+            n_correspondences=int(fit["n_pairs"]),
+            n_inliers=int(fit["n_inliers"]),
+            converged=fit["iterations"] < self.config.max_iter,
+            status=status,  # type: ignore[arg-type]
+            timings=timings,
+            message=message,
+            info=info,
+        )
+
+    def stability(
+        self,
+        P: np.ndarray,
+        fit: dict[str, Any],
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
+        info: dict[str, Any],
+    ) -> tuple[dict[str, Any], bool]:
+        """Register ``P`` again from the answer ``fit`` displaced along its weakest direction.
+
+        **[interpretation]** A step whose answer depends on where the solver starts is not
+        determined by the scan. The weakest direction is the smallest eigenvector of the
+        answer's information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled
+        by the lever arm ``radius`` (m); the start is displaced by ``stability_k`` σ along it,
+        at most ``stability_cap`` map voxels (metres of translation, or of arc at ``radius``).
+        The second answer goes through the same point-to-point refinement on repeated points
+        as the first. The answers' distance is measured in the same information (σ). Returns the
+        better-fitting answer (lower robust RMS, the first on ties) and whether the distance
+        exceeds ``stability_gate``.
+        """
+        c = self.config
+        assert self.map is not None
+        H_post = fit["H"] / fit["var_factor"] + Lam
+        H_post = 0.5 * (H_post + H_post.T)
+        sc = np.array([1.0, 1.0, 1.0, radius, radius, radius])  # y = sc * ξ, metres
+        Hs = H_post / sc[:, None] / sc[None, :]
+        ev, U = np.linalg.eigh(Hs)
+        if not np.all(np.isfinite(ev)) or ev[0] <= 0:
+            return fit, False
+        sig_w = 1.0 / math.sqrt(float(ev[0]))
+        shift = min(c.stability_k * sig_w, c.stability_cap * self.map.voxel_size)
+        xi0 = U[:, 0] * shift / sc
+        T0 = exp_se3(xi0) @ fit["T"]
+        T_c = exp_se3(xi0) @ T_pred if c.stability_mode == "prior" else T_pred
+        alt = self.register_on_map(
+            P, self.map.information, T0, T_c, Lam, gate, rng, kernel_scale=c.stability_kernel
+        )
+        # the same pipeline as the first answer: refined point to point on repeated points
+        alt, _, _ = self.repeats.apply(
+            P, alt, T_c, Lam, gate, rng, False, self.map, self.spacing0, self.register_on_map
+        )
+        d = log_se3(alt.T @ invert(fit["T"]))
+        dist = math.sqrt(max(float(d @ H_post @ d), 0.0))
+        rms_alt = alt.rms
+        info.update(
+            stability_distance=dist,
+            stability_start_sigma=shift / sig_w,
+            stability_start=shift,
+            stability_follow=dist / max(math.sqrt(float(xi0 @ H_post @ xi0)), 1e-300),
+            stability_shift=d.copy(),
+            stability_rms=rms_alt,
+        )
+        unstable = dist > c.stability_gate
+        if unstable and rms_alt < fit["rms"]:
+            fit = dict(fit, T=alt.T, rms=rms_alt)
+        return fit, unstable
+
+    def weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
+        """Information (left, target frame) of the first frame's weak motion prior."""
+        st, sr = self.first_sigma
+        return left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
+
+    def register_on_map(
+        self,
+        P: np.ndarray,
+        info: np.ndarray,
+        T0: np.ndarray,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        kernel_scale: float = 1.0,
+        voxel_map: VoxelMap | None = None,
+    ) -> ScanToMapFit:
+        """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
+        per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
+        Lam)`` (left twist information, target frame); ``gate`` the pair gate (m), ``rng`` the
+        scan's median range (m, for the rotation tolerance); ``voxel_map`` another map than
+        the navigator's (its information is then ``info``). The solver's options come from the
+        configuration (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
+        c = self.config
+        target = self.map if voxel_map is None else voxel_map
+        assert target is not None
+        v = target.voxel_size
+        return solve_scan_to_map(
+            P,
+            target,
+            np.ascontiguousarray(T0),
+            np.ascontiguousarray(T_pred),
+            np.ascontiguousarray(Lam),
+            gate,
+            float(c.kernel) * kernel_scale,
+            int(c.max_iter),
+            c.tolerance * v,
+            c.tolerance * v / max(rng, 1.0),
+            c0=float(c.kernel_start) * kernel_scale,
+            decay=float(c.kernel_decay),
+            information=info,
+        )
+
+    def solve(
+        self,
+        P: np.ndarray,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
+        primary: bool = True,
+        Lam_fit: np.ndarray | None = None,
+        voxel_map: VoxelMap | None = None,
+        start: np.ndarray | None = None,
+    ) -> dict[str, Any]:
+        """One registration onto the map and its quality figures (``rng``: the scan's median
+        range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
+        under the motion model's prior). With ``repeat_refine`` the answer is refined point to
+        point when the scan repeats the previous scan's surface points
+        (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the
+        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
+        ``voxel_map``: register onto that map instead of the navigator's."""
+        c = self.config
+        target = self.map if voxel_map is None else voxel_map
+        assert target is not None
+        Lf = Lam if Lam_fit is None else Lam_fit
+        T0 = T_pred if start is None else start
+        fit = self.register_on_map(
+            P, target.information, T0, T_pred, Lf, gate, rng, voxel_map=target
+        )
+        repeat_frac, repeated = float("nan"), False
+        if voxel_map is None:  # the repeated-points test compares with the navigator's map
+            fit, repeat_frac, repeated = self.repeats.apply(
+                P,
+                fit,
+                T_pred,
+                Lf,
+                gate,
+                rng,
+                primary,
+                self.map,
+                self.spacing0,
+                self.register_on_map,
+            )
+        n = len(P)
+        if c.information == "normal":
+            H_cov = normal_information(
+                P,
+                fit.T,
+                fit.idx,
+                fit.d2,
+                target.normals,
+                target.information,
+                target.inplane_sigma**2,
+                float(c.kernel) ** 2,
+            )
+        else:
+            H_cov = fit.H
+        has = fit.d2 >= 0
+        inl = has & (fit.d2 < 9.0)
+        xi = log_se3(fit.T @ invert(T_pred))
+        rms = fit.rms if fit.sw > 0 else float("nan")
+        return {
+            "T": fit.T,
+            "H": H_cov,
+            "n_pairs": fit.n_pairs,
+            "iterations": fit.iterations,
+            "overlap": float(has.sum()) / n,
+            "fitness": float(inl.sum()) / n,
+            "n_inliers": int(inl.sum()),
+            "chi2": float(xi @ Lam @ xi),
+            "cond": degeneracy(H_cov, radius),
+            "rms": rms,
+            "var_factor": variance_factor(rms),
+            "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
+            "repeat_fraction": repeat_frac,
+            "repeated": repeated,
+        }
+
+    def map_options(self) -> dict[str, Any]:
+        """The navigator's patch and weighting parameters of a :class:`VoxelMap` (metres from
+        the multiples of ``s₀``), shared by its map and the pose graph's keyframe maps."""
+        c, s0 = self.config, self.spacing0
+        return {
+            "max_weight": c.max_voxel_weight,
+            "noise_floor": c.noise_floor * s0,
+            "inplane_sigma": c.inplane_sigma * s0,
+            "k_neighbors": c.k_neighbors,
+            "nonplanar_gain": c.nonplanar_gain,
+            "surface": c.surface,
+            "curvature_sigma": c.curvature_sigma,
+            "quadric_reach": c.quadric_reach * s0,
+        }
+
+    def new_map(self) -> VoxelMap:
+        """An empty map with the navigator's parameters (voxel ``voxel_factor · s₀``)."""
+        c = self.config
+        return VoxelMap(
+            c.voxel_factor * self.spacing0, max_voxels=c.max_voxels, **self.map_options()
+        )
