@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["jacobi_eigh"]
+__all__ = ["jacobi_eigh", "solve_spd6"]
 
 
 @njit(cache=True)
@@ -59,3 +59,34 @@ def jacobi_eigh(A_in: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: n
     for p in range(n):
         w[p] = A[p, p]
     return w, V
+
+
+@njit(cache=True)
+def solve_spd6(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Solve the symmetric positive definite system ``A x = b`` (6×6, e.g. normal equations of a
+    pose) by Cholesky with a tiny ridge; a non-positive pivot is replaced by 1e-300."""
+    n = 6
+    L = np.zeros((n, n))
+    ridge = 1e-12 * (abs(A[0, 0]) + abs(A[3, 3]) + 1.0)
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j] + (ridge if i == j else 0.0)
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                L[i, i] = math.sqrt(s) if s > 0.0 else 1e-300
+            else:
+                L[i, j] = s / L[j, j]
+    y = np.zeros(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x

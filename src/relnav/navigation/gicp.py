@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from relnav.geometry.eigen import solve_spd6
 from relnav.geometry.icp_kernels import _rodrigues_nb
 from relnav.geometry.kdtree import _children
 from relnav.geometry.lie import _rot_log
@@ -60,36 +61,6 @@ def _prior_twist(T: np.ndarray, Tp: np.ndarray) -> np.ndarray:  # pragma: no cov
     w = _rot_log(Rd)
     xi[3], xi[4], xi[5] = w[0], w[1], w[2]
     return xi
-
-
-@njit(cache=True)
-def _solve6(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
-    """Solve the SPD system ``A x = b`` (6×6) by Cholesky with a tiny ridge."""
-    n = 6
-    L = np.zeros((n, n))
-    ridge = 1e-12 * (abs(A[0, 0]) + abs(A[3, 3]) + 1.0)
-    for i in range(n):
-        for j in range(i + 1):
-            s = A[i, j] + (ridge if i == j else 0.0)
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            if i == j:
-                L[i, i] = math.sqrt(s) if s > 0.0 else 1e-300
-            else:
-                L[i, j] = s / L[j, j]
-    y = np.zeros(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    x = np.zeros(n)
-    for i in range(n - 1, -1, -1):
-        s = y[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x
 
 
 @njit(cache=True)
@@ -391,7 +362,7 @@ def _solve_loop(
             for q in range(6):
                 s += Lam[p, q] * xi[q]
             b[p] = -s
-        delta = _solve6(A, b)
+        delta = solve_spd6(A, b)
         R = _rodrigues_nb(delta[3:].copy())
         Tn = np.eye(4)
         for a in range(3):

@@ -32,8 +32,8 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
+from relnav.geometry.eigen import solve_spd6
 from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
-from relnav.navigation.gicp import _solve6
 
 log = logging.getLogger(__name__)
 
@@ -220,7 +220,7 @@ def _quadric_kernel(
         A[2, 2] += 1.0
         for r in range(3, 6):
             A[r, r] += 1.0 / (curv_sigma * curv_sigma)
-        c = _solve6(A, b)
+        c = solve_spd6(A, b)
         t1 = (t10, t11, t12)
         t2 = (t20, t21, t22)
         out[i, 0] = c[0]
