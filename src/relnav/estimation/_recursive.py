@@ -461,7 +461,7 @@ class RecursiveEstimator:
         when the points are spread anisotropically, and whose raw ``t`` carries the affine
         block's error ``(R̂ − R) ā`` (ā tens of metres away in odometry) and depends on the
         coordinate origin. Measured on sim-voyager (fixed noiseless model cloud, 60 frames,
-        the same SHOT + GCC correspondences, ``benchmarks/paper1_estimators_same_corr.py``):
+        the same SHOT + GCC correspondences, ``benchmarks/paper1/paper1_estimators_same_corr.py``):
         affine fit + Frobenius projection T_error 5.3 %, + consistent ``t`` 3.6 %, + data
         projection 0.59 % (= Kabsch weighted by ``1/M_u``; unweighted Kabsch 1.07 %).
     warm_start : bool

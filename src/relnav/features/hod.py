@@ -21,7 +21,7 @@ the LRF-based descriptors; the all-pairs reading is ``O(|S|²)``.
 
 Evidence on Paper 1's own data generation (issue 9; fixed model cloud with the presets' 1 cm
 range noise, first 40 frames, seed 0, GCC, the same correspondences for every estimator,
-``benchmarks/paper1_estimators_same_corr.py --presets sim-voyager sim-orion sim-bennu
+``benchmarks/paper1/paper1_estimators_same_corr.py --presets sim-voyager sim-orion sim-bennu
 sim-helical --frames 40 --descriptors hods hod --variants svd kalman --descriptor-option
 pairs=<p> --radius-factor <r>``), HoD-S / Kalman T_error % on voyager, orion, bennu, helical:
 

@@ -17,7 +17,7 @@ correlates 1.0000 with the default on every keypoint of the fixture. Against PCL
 own greedy-projection mesh, the default and ``lrf="points"`` correlate 0.93-0.95 (median): the
 x axis (largest scatter eigenvalue) depends on which triangles cover the support, and PCL's
 greedy mesh leaves holes; PCL against itself with greedy-projection ``mu`` 4 instead of 2.5
-gives the same 0.94-0.95 (``benchmarks/pcl_reference``).
+gives the same 0.94-0.95 (``benchmarks/paper1/pcl_reference``).
 
 For each keypoint ``p`` the support points (``‖q − p‖ ≤ r``, keypoint included) are expressed in
 the LRF, ``q' = LRF (q − p)``. For each axis ``a ∈ (x, y, z)`` and each angle

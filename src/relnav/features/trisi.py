@@ -23,7 +23,7 @@ Two binning conventions (``layout``):
   ``|n_q·n_p| ≥ cos θ_max`` (opposite normals kept) and only applies for ``θ_max < 90°``;
   bilinear weights onto the 4 surrounding nodes; flattened **α-major** (``j·(2w+1) + i``) →
   ``(w+1)(2w+1) = 153`` values for ``w = 8``, normalised to unit sum. Verified against PCL's
-  output (``tests/data/pcl``, ``benchmarks/pcl_reference``).
+  output (``tests/data/pcl``, ``benchmarks/paper1/pcl_reference``).
 
 ``interpolation="nearest"`` puts each point in the single nearest cell / node instead.
 

@@ -2,7 +2,7 @@
 
 The flat arrays of :func:`_kd_build` are what the numba loops take (the ICP loop in
 :mod:`relnav.geometry.icp_kernels`, the navigator's voxel map and GICP); :class:`KDTree` wraps
-them for Python callers. ``benchmarks/bench_kdtree.py`` compares it with scipy's ``cKDTree``
+them for Python callers. ``benchmarks/speed/bench_kdtree.py`` compares it with scipy's ``cKDTree``
 and ``pykdtree`` on the ICP loop's query (transform + nearest neighbour within the gate): it is
 kept because it is the faster one there.
 """
@@ -322,7 +322,7 @@ class KDTree:
     """Static 3-D KD-tree in numba: exact nearest neighbour within an optional distance bound.
 
     About 3× faster per query than :class:`scipy.spatial.cKDTree` and 1.1–1.8× faster than
-    ``pykdtree`` for the single-NN queries of ICP (``benchmarks/bench_kdtree.py``; its build is
+    ``pykdtree`` for the single-NN queries of ICP (``benchmarks/speed/bench_kdtree.py``; its build is
     slower, but one build serves every iteration), and :meth:`nn` transforms the queries on the
     fly (one pass per iteration).
     :meth:`query` mirrors ``cKDTree.query`` (``k > 1`` falls back to a cKDTree built lazily).

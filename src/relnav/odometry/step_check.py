@@ -21,7 +21,7 @@ better informed than the registration) but marks it as not trusted; only ``degen
 step must have to count as right, the same figures the navigation suite uses to count wrong steps.
 
 Factors were chosen on sim-bennu and the flash sequence comet-ellipse-64 and frozen
-(``benchmarks/step_flags.py`` measures recall and false flags on other sequences).
+(``benchmarks/paper1/step_flags.py`` measures recall and false flags on other sequences).
 """
 
 from __future__ import annotations

@@ -213,7 +213,7 @@ class AttitudeSpec(StrictModel):
     ``omega0_deg_s``. ``initial_rpy_deg`` is the attitude at t = 0 (extrinsic xyz, degrees).
     ``phase_s`` (s, default 0) enters the same motion later: the attitude at a frame's time
     ``t`` is the law's at ``t + phase_s`` (a Monte Carlo over where a tumble is when the
-    sensor starts: ``benchmarks/nav_phases.py``).
+    sensor starts: ``benchmarks/nav/nav_phases.py``).
     """
 
     kind: Literal["static", "spin", "tumble"] = "static"
