@@ -20,6 +20,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("features",),
     ("matching",),
     ("estimation",),
+    ("filtering",),
     ("registration",),
     ("fusion",),
     ("odometry",),

@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
+from relnav.filtering.tracker import Observation
 from relnav.fusion.observer_noise import (
     CALIBRATION_FILTER_OPTIONS,
     CONTOUR_LI_ROTATING,
@@ -22,7 +23,7 @@ from relnav.fusion.observer_noise import (
     calibrated_noise,
     evaluate_observer_noise,
 )
-from relnav.fusion.observers import Observation, simulate_observations
+from relnav.fusion.observers import simulate_observations
 
 OMEGA0 = np.radians([0.0, 0.0, 5.0])
 OPTIONS = {
@@ -99,7 +100,7 @@ def test_observer_noise_json_round_trip_and_bad_files(tmp_path: Path) -> None:
 def test_the_true_model_is_consistent_and_the_calibration_finds_it() -> None:
     """An observer with white error and a body-fixed drift: given the true model the filter is
     near consistency over 20 runs (NIS 5.3, NEES 15.0: its start-up, steps 2-9, is over-confident
-    even without drift, ANEES 14 there, as in test_fusion_consistency), ignoring the drift is
+    even without drift, ANEES 14 there, as in test_filtering_consistency), ignoring the drift is
     far from it; calibrated on 6 other runs (truth-based moments), the model's held-out NIS
     and NEES are as near 6 and 12 as the true model's."""
     held = [_drifting_run(s) for s in range(20)]

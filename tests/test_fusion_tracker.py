@@ -12,13 +12,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.tracker import (
-    Observation,
-    Tracker,
-    simulate_observations,
-    track_sequence,
-)
-from relnav.fusion.ukf import ProcessNoise
+from relnav.filtering.tracker import Observation, Tracker
+from relnav.filtering.ukf import ProcessNoise
+from relnav.fusion.observers import simulate_observations
+from relnav.fusion.tracker import track_sequence
 from relnav.geometry.rotations import euler_to_matrix
 from relnav.geometry.se3 import from_rt, invert, transform_points
 
@@ -270,7 +267,7 @@ def test_rate_error_in_sensor_axes_ignores_a_constant_body_frame_offset(tmp_path
     """errors()["omega_sensor"]: an estimate whose body axes are the true ones turned by a
     constant ε (an uncooperative target's map) has the body-axis rate error ω − R_εᵀ ω, but the
     same rate vector in the sensor's axes: no error there."""
-    from relnav.fusion.track_result import TrackResult, TrackTruth
+    from relnav.filtering.track_result import TrackResult, TrackTruth
 
     K = 30
     t = np.arange(K, dtype=float) * 2.0
@@ -296,7 +293,7 @@ def test_rate_error_in_sensor_axes_ignores_a_constant_body_frame_offset(tmp_path
 
 
 def _nis_track(nis: np.ndarray):
-    from relnav.fusion.track_result import TrackResult
+    from relnav.filtering.track_result import TrackResult
 
     K = len(nis)
     return TrackResult(

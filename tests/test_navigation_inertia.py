@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.ukf import TwistorUKF, euler_rates
+from relnav.filtering.ukf import TwistorUKF, euler_rates
 from relnav.navigation.inertia import InertiaFit, fit_inertia, rate_sweep_deg, refine_inertia
 
 

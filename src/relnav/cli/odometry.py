@@ -47,7 +47,7 @@ def _block_means(values: Any) -> dict[str, float | None]:
     """Mean of each column of ``values`` ``(K, 4)`` over its finite steps, by block name."""
     import numpy as np
 
-    from relnav.fusion.track_result import STATE_BLOCKS
+    from relnav.filtering.track_result import STATE_BLOCKS
 
     out: dict[str, float | None] = {}
     for name, col in zip(STATE_BLOCKS, values.T, strict=True):

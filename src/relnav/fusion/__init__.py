@@ -1,4 +1,5 @@
-"""Paper 2: cross-source fusion (CGA point-to-sphere), plane clustering, twistor UKF tracking.
+"""Paper 2: cross-source fusion (CGA point-to-sphere), plane clustering, contour model, and the
+chain that tracks a target from them (its filters are in :mod:`relnav.filtering`).
 
 Entry points are re-exported lazily (``import relnav.fusion`` stays cheap)::
 
@@ -17,12 +18,6 @@ _EXPORTS = {
     "ContourModel": "relnav.fusion.reconstruction",
     "fuse_frame": "relnav.fusion.reconstruction",
     "CBDRegistration": "relnav.fusion.cbd",
-    "ClohessyWiltshire": "relnav.fusion.dynamics",
-    "mean_motion": "relnav.fusion.dynamics",
-    "TwistorUKF": "relnav.fusion.ukf",
-    "QuaternionEKF": "relnav.fusion.ekf",
-    "Tracker": "relnav.fusion.tracker",
-    "TrackResult": "relnav.fusion.tracker",
     "track_sequence": "relnav.fusion.tracker",
 }
 

@@ -38,7 +38,7 @@ from typing import Any, Literal
 import numpy as np
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.observers import Observation
+from relnav.filtering.tracker import Observation
 
 __all__ = [
     "CALIBRATION_FILTER_OPTIONS",
@@ -240,10 +240,10 @@ def consistency_of(results: Sequence[Any]) -> dict[str, Any]:
 def evaluate_observer_noise(
     model: ObserverNoise, runs: Sequence[CalibrationRun], tracker_options: dict[str, Any]
 ) -> dict[str, Any]:
-    """Track every run with ``model``'s noise (:class:`relnav.fusion.tracker.Tracker` with
+    """Track every run with ``model``'s noise (:class:`relnav.filtering.tracker.Tracker` with
     ``tracker_options``) and return :func:`consistency_of` the results (the truth of the runs
     that have one attached)."""
-    from relnav.fusion.tracker import Tracker
+    from relnav.filtering.tracker import Tracker
 
     results = []
     for run in runs:
@@ -274,7 +274,7 @@ def calibrate_observer_noise(
 ) -> tuple[ObserverNoise, dict[str, Any]]:
     """Choose an observer's noise model on recorded runs.
 
-    Every evaluation runs :class:`relnav.fusion.tracker.Tracker` (``tracker_options``; it must
+    Every evaluation runs :class:`relnav.filtering.tracker.Tracker` (``tracker_options``; it must
     carry the observer bias, ``observer_bias=True``) over every run with the candidate model
     (:meth:`ObserverNoise.apply`), and Nelder–Mead moves the log of the 1σ values.
 

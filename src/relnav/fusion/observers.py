@@ -1,6 +1,6 @@
-"""Paper 2 per-frame observations: :class:`Observation`, the :class:`Observer` protocol and its
-implementations (scans → observed pose of the target in the sensor frame), and simulated
-observations for tests and benchmarks.
+"""Paper 2 per-frame observations (:class:`~relnav.filtering.tracker.Observation`): the
+:class:`Observer` protocol and its implementations (scans → observed pose of the target in the
+sensor frame), and simulated observations for tests and benchmarks.
 
 :class:`RegistrationObserver` chains frame-to-frame registrations on one sensor;
 :class:`ContourObserver` is Paper 2's chain (cross-source registration, plane clustering,
@@ -12,16 +12,16 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.dynamics import ClohessyWiltshire
-from relnav.fusion.pose_filter import quat_delta
-from relnav.fusion.track_result import TrackTruth
+from relnav.filtering.dynamics import ClohessyWiltshire
+from relnav.filtering.pose_filter import quat_delta
+from relnav.filtering.track_result import TrackTruth
+from relnav.filtering.tracker import Observation
 from relnav.geometry.dualquat import _qmul
 from relnav.geometry.rotations import project_to_so3, quat_to_matrix
 from relnav.geometry.se3 import invert
@@ -31,70 +31,12 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ContourObserver",
-    "Observation",
     "Observer",
     "RegistrationObserver",
     "simulate_observations",
 ]
 
 log = logging.getLogger(__name__)
-
-
-# --------------------------------------------------------------------------------------------
-# data containers
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Observation:
-    """One per-frame observation of the target.
-
-    Attributes
-    ----------
-    position : (3,) ndarray
-        Target reference point (centroid) in the sensor frame, m.
-    quat_xyzw : (4,) ndarray
-        Attitude ``R_sensor_body``.
-    quality : float
-        Observer's quality score (e.g. registration fitness, 1 = best).
-    R : (6, 6) ndarray, optional
-        Covariance of ``[δp (m), δθ (rad)]``; default: the filter's.
-    drift : (6, 6) ndarray, optional
-        Growth of the observer's own slowly varying error since its previous observation
-        (same coordinates), for ``TwistorUKF(observer_bias=True)``.
-    offset_drift : (3, 3) ndarray, optional
-        Growth of the offset of the observer's reference point from the target's origin since
-        its previous observation (m², sensor axes), for ``TwistorUKF(centre_offset=True)``
-        (:meth:`~relnav.fusion.ukf.TwistorUKF.add_offset_drift`).
-    frame : int, optional
-        The observer's id of this frame when the frame was merged into its model (the keys of
-        later observations' ``sources``); ``None``: not merged.
-    sources : dict of int to float, optional
-        Where the observation's model matches came from: ``{frame id: share}`` of the earlier
-        merged frames (shares sum to 1), for ``TwistorUKF(merge_slots=…)``. Each merged frame
-        wrote its pose error into the model, and a registration onto that part of the model
-        inherits it. An empty dict marks the anchor frame, which defines the body frame (its
-        merge carries no error); ``None``: no such information.
-    """
-
-    position: np.ndarray
-    quat_xyzw: np.ndarray
-    quality: float = 1.0
-    R: np.ndarray | None = None
-    drift: np.ndarray | None = None
-    offset_drift: np.ndarray | None = None
-    frame: int | None = None
-    sources: dict[int, float] | None = None
-
-    def __post_init__(self) -> None:
-        p = np.asarray(self.position, dtype=np.float64)
-        q = np.asarray(self.quat_xyzw, dtype=np.float64)
-        if p.shape != (3,) or q.shape != (4,):
-            raise InputError(
-                f"observation needs position (3,) and quat_xyzw (4,), got {p.shape}, {q.shape}"
-            )
-        object.__setattr__(self, "position", p)
-        object.__setattr__(self, "quat_xyzw", q)
 
 
 # --------------------------------------------------------------------------------------------

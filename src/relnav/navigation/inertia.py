@@ -33,8 +33,8 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import InputError
-from relnav.fusion.pose_filter import _canon_q, quat_delta
-from relnav.fusion.ukf import euler_rates, torque_free_acceleration
+from relnav.filtering.pose_filter import _canon_q, quat_delta
+from relnav.filtering.ukf import euler_rates, torque_free_acceleration
 from relnav.geometry.dualquat import _qmul
 
 __all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg", "refine_inertia"]

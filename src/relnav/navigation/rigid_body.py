@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from relnav.fusion.track_result import TrackResult
+from relnav.filtering.track_result import TrackResult
 from relnav.navigation.inertia import InertiaFit, fit_inertia, refine_inertia
 
 __all__ = ["rigid_body_pass"]

@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from relnav.errors import ConfigError
-from relnav.fusion.multiple_model import mix_tracks
-from relnav.fusion.tracker import Observation, Tracker, TrackResult, TrackTruth
+from relnav.filtering.multiple_model import mix_tracks
+from relnav.filtering.track_result import TrackResult, TrackTruth
+from relnav.filtering.tracker import Observation, Tracker
 from relnav.geometry.rotations import hat, matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.inertia import InertiaFit

@@ -1,7 +1,7 @@
 """Noise settings of Paper 2's pose filters in physical units (1σ per nominal step): process noise,
-measurement noise and initial uncertainty, shared by :class:`relnav.fusion.ukf.TwistorUKF` and
-:class:`relnav.fusion.ekf.QuaternionEKF` ([interpretation]: Paper 2 gives no values; the defaults
-are documented in :mod:`relnav.fusion.ukf`).
+measurement noise and initial uncertainty, shared by :class:`relnav.filtering.ukf.TwistorUKF` and
+:class:`relnav.filtering.ekf.QuaternionEKF` ([interpretation]: Paper 2 gives no values; the defaults
+are documented in :mod:`relnav.filtering.ukf`).
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ class ProcessNoise:
     torque_free_share : float
         Share of that bound taken (default 1): a bank of filters with smaller shares lets the
         data say whether the target spins about a principal axis
-        (:func:`relnav.fusion.multiple_model.mix_tracks`).
+        (:func:`relnav.filtering.multiple_model.mix_tracks`).
     """
 
     position: float = 1e-4

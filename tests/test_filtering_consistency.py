@@ -13,9 +13,10 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.track_result import TrackResult, TrackTruth
-from relnav.fusion.tracker import Observation, Tracker, simulate_observations
-from relnav.fusion.ukf import TwistorUKF
+from relnav.filtering.track_result import TrackResult, TrackTruth
+from relnav.filtering.tracker import Observation, Tracker
+from relnav.filtering.ukf import TwistorUKF
+from relnav.fusion.observers import simulate_observations
 
 OMEGA0 = np.radians([0.0, 0.0, 5.0])
 # a rigid body spinning at a constant rate: small process noise is the right model

@@ -1,7 +1,7 @@
 """Multiplicative quaternion EKF — the baseline of Paper 2 (ALGORITHMS.md §G.7).
 
 Standard MEKF (Lefferts, Markley, Shuster 1982) in the form of Kang et al. (2021), Paper 2's
-reference [57], on the same state and measurement as :class:`relnav.fusion.ukf.TwistorUKF`:
+reference [57], on the same state and measurement as :class:`relnav.filtering.ukf.TwistorUKF`:
 nominal ``d, ḋ`` (sensor frame), ``q`` (``R_sensor_body``, xyzw), ``ω`` (body, rad/s).
 
 * Error state (12): ``[δd, δḋ, δθ, δω]`` with ``q_true = q ⊗ [½δθ, 1]`` (body-frame attitude
@@ -33,9 +33,9 @@ from typing import Any, Literal
 import numpy as np
 
 from relnav.errors import ConfigError
-from relnav.fusion.dynamics import TranslationModel
-from relnav.fusion.noise import InitialUncertainty, MeasurementNoise, ProcessNoise
-from relnav.fusion.pose_filter import (
+from relnav.filtering.dynamics import TranslationModel
+from relnav.filtering.noise import InitialUncertainty, MeasurementNoise, ProcessNoise
+from relnav.filtering.pose_filter import (
     PAPER2_RATE_HZ,
     PoseFilter,
     UpdateInfo,
@@ -71,7 +71,7 @@ class QuaternionEKF(PoseFilter):
     ----------
     n_mean_motion, dt, q, r, p0, position0, velocity0, quat0, omega0, translation_model,
     lvlh_axes, gate_probability, gate_patience
-        As for :class:`relnav.fusion.ukf.TwistorUKF`.
+        As for :class:`relnav.filtering.ukf.TwistorUKF`.
     jacobian : {"first-order", "exact"}
         Discretization of the error dynamics (module docstring).
     covariance_update : {"joseph", "standard"}

@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.dynamics import (
+from relnav.filtering.dynamics import (
     MU_EARTH,
     ClohessyWiltshire,
     axis_permutation,

@@ -133,7 +133,7 @@ class TrackResult:
         Measurement-covariance scale ``λ`` used per step (``Tracker(noise_scale=...)``).
     log_likelihood : (K,), optional
         Gaussian log-likelihood of each update's innovation (NaN without one): the evidence a
-        bank of filters is weighed by (:func:`relnav.fusion.multiple_model.mix_tracks`).
+        bank of filters is weighed by (:func:`relnav.filtering.multiple_model.mix_tracks`).
     model_probability : (K, M), optional
         For a mixed track, each member's probability per step (labels in
         ``meta["models"]``).

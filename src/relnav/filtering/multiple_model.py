@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import InputError
-from relnav.fusion.track_result import TrackResult
+from relnav.filtering.track_result import TrackResult
 
 __all__ = ["mix_tracks", "model_probabilities"]
 

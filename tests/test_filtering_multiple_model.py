@@ -1,4 +1,4 @@
-"""A bank of filters weighed by their innovations' likelihood (relnav.fusion.multiple_model)."""
+"""A bank of filters weighed by their innovations' likelihood (relnav.filtering.multiple_model)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import multivariate_normal
 
 from relnav.errors import InputError
-from relnav.fusion.multiple_model import mix_tracks, model_probabilities
-from relnav.fusion.pose_filter import UpdateInfo
-from relnav.fusion.track_result import TrackResult
+from relnav.filtering.multiple_model import mix_tracks, model_probabilities
+from relnav.filtering.pose_filter import UpdateInfo
+from relnav.filtering.track_result import TrackResult
 
 
 def test_update_log_likelihood_is_the_gaussian_density(rng):
@@ -97,8 +97,8 @@ def test_a_bank_of_trackers_prefers_the_model_that_generated_the_data(tmp_path):
     one; the likelihoods are those of the updates; the CSV carries the probabilities."""
     import csv
 
+    from relnav.filtering.tracker import Tracker
     from relnav.fusion.observers import simulate_observations
-    from relnav.fusion.tracker import Tracker
 
     t, obs, truth = simulate_observations(30, 4.5, seed=3)
     loose = {"position": 1e-2, "velocity": 1e-2, "attitude": 0.05, "omega": 0.02}

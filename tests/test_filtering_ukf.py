@@ -15,10 +15,11 @@ import pytest
 from scipy.stats import chi2
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.dynamics import mean_motion
-from relnav.fusion.ekf import QuaternionEKF
-from relnav.fusion.tracker import Tracker, simulate_observations
-from relnav.fusion.ukf import MeasurementNoise, ProcessNoise, TwistorUKF, quat_delta
+from relnav.filtering.dynamics import mean_motion
+from relnav.filtering.ekf import QuaternionEKF
+from relnav.filtering.tracker import Tracker
+from relnav.filtering.ukf import MeasurementNoise, ProcessNoise, TwistorUKF, quat_delta
+from relnav.fusion.observers import simulate_observations
 from relnav.geometry.rotations import quat_multiply
 
 N_LEO = mean_motion(6_778_137.0)

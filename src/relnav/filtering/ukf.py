@@ -10,7 +10,7 @@ y left, z up) unless stated:
   ``d`` as the unit pose dual quaternion ``q̂ = q + ε ½ d ⊗ q`` (``T_s_b``);
 * ``ω`` (rad/s): body angular rate in ``b`` (``q̇ = ½ q ⊗ [ω, 0]``), constant between frames.
 
-Translation follows Clohessy–Wiltshire (:mod:`relnav.fusion.dynamics`; ``n = 0`` is a
+Translation follows Clohessy–Wiltshire (:mod:`relnav.filtering.dynamics`; ``n = 0`` is a
 force-free double integrator), attitude the body rates (eq. 31, right multiplication).
 
 Error state (``L = 15``): ``[δd (3), δḋ (3), B (6), δω (3)]`` with ``B = cayley(q̂⁻¹ ⊗ q̂_true)``
@@ -47,8 +47,8 @@ Interpretations (Paper 2 is garbled or silent; each is named here)
   :class:`MeasurementNoise`, :class:`InitialUncertainty` (= ``P₀ = 1e-2 I`` in error
   coordinates).
 
-The noise settings live in :mod:`relnav.fusion.noise`, the base class shared with the EKF in
-:mod:`relnav.fusion.pose_filter` (both re-exported here).
+The noise settings live in :mod:`relnav.filtering.noise`, the base class shared with the EKF in
+:mod:`relnav.filtering.pose_filter` (both re-exported here).
 
 References
 ----------
@@ -66,9 +66,9 @@ from typing import Any, Literal
 import numpy as np
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.dynamics import TranslationModel
-from relnav.fusion.noise import InitialUncertainty, MeasurementNoise, ProcessNoise
-from relnav.fusion.pose_filter import (
+from relnav.filtering.dynamics import TranslationModel
+from relnav.filtering.noise import InitialUncertainty, MeasurementNoise, ProcessNoise
+from relnav.filtering.pose_filter import (
     PAPER2_RATE_HZ,
     PoseFilter,
     UpdateInfo,
@@ -207,7 +207,7 @@ class TwistorUKF(PoseFilter):
     translation_model : {"cw", "euler"}
         Exact CW transition or Paper 2 eq. 38's Euler step.
     lvlh_axes : str or (3, 3), optional
-        Sensor → LVLH axes (:func:`relnav.fusion.dynamics.axis_permutation`).
+        Sensor → LVLH axes (:func:`relnav.filtering.dynamics.axis_permutation`).
     innovation : {"position+rotation", "twist"}
         Measurement coordinates (module docstring).
     update_sigma : {"redraw", "propagated"}

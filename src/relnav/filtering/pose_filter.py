@@ -2,8 +2,8 @@
 frame ``s`` / body frame ``b``), CW propagation settings, accessors, NIS/NEES and the update record
 (:class:`UpdateInfo`), with the small quaternion helpers both filters use.
 
-Implemented by :class:`relnav.fusion.ukf.TwistorUKF` and :class:`relnav.fusion.ekf.QuaternionEKF`;
-conventions in :mod:`relnav.fusion.ukf`.
+Implemented by :class:`relnav.filtering.ukf.TwistorUKF` and
+:class:`relnav.filtering.ekf.QuaternionEKF`; conventions in :mod:`relnav.filtering.ukf`.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from relnav.errors import ConfigError, InputError
-from relnav.fusion.dynamics import ClohessyWiltshire, TranslationModel
-from relnav.fusion.noise import InitialUncertainty, MeasurementNoise, ProcessNoise, _coerce
+from relnav.filtering.dynamics import ClohessyWiltshire, TranslationModel
+from relnav.filtering.noise import InitialUncertainty, MeasurementNoise, ProcessNoise, _coerce
 from relnav.geometry.dualquat import (
     _qmul,
 )
@@ -137,7 +137,7 @@ def _check_vec(x: Any, n: int, name: str) -> np.ndarray:
 
 
 class PoseFilter:
-    """Common state handling of :class:`TwistorUKF` and :class:`relnav.fusion.ekf.QuaternionEKF`.
+    """Common state handling of :class:`TwistorUKF` and :class:`relnav.filtering.ekf.QuaternionEKF`.
 
     Nominal state: ``position`` ``d`` (m, sensor frame), ``velocity`` (m/s), ``quaternion``
     (xyzw, ``R_sensor_body``, ``w ≥ 0``), ``omega`` (rad/s, body frame). Subclasses implement
