@@ -77,7 +77,7 @@ from relnav.bench.nav_suite import (
     suite,
     tumbling_holdout,
 )
-from relnav.fusion.track_result import STATE_BLOCKS
+from relnav.filtering.track_result import STATE_BLOCKS
 
 TUMBLING = ["envisat-tumble-64", "aura-tumble-64"]
 

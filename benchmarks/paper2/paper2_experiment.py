@@ -45,6 +45,8 @@ import numpy as np
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
+from relnav.filtering.track_result import TrackResult, TrackTruth
+from relnav.filtering.tracker import Observation, Tracker
 from relnav.fusion.observer_noise import (
     CALIBRATION_FILTER_OPTIONS,
     CONTOUR_LI_ROTATING,
@@ -53,10 +55,6 @@ from relnav.fusion.observer_noise import (
 )
 from relnav.fusion.tracker import (
     ContourObserver,
-    Observation,
-    Tracker,
-    TrackResult,
-    TrackTruth,
     _align_truth,
     track_sequence,
 )

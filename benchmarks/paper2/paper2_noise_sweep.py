@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from paper2_experiment import OMEGA0, _band, _pack, _truth_for, recorded_observations
 
-from relnav.fusion.tracker import Tracker
+from relnav.filtering.tracker import Tracker
 
 
 def consistency(

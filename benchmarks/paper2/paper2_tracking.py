@@ -25,9 +25,11 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from relnav.fusion.dynamics import mean_motion
-from relnav.fusion.tracker import Tracker, simulate_observations, track_sequence
-from relnav.fusion.ukf import ProcessNoise
+from relnav.filtering.dynamics import mean_motion
+from relnav.filtering.tracker import Tracker
+from relnav.filtering.ukf import ProcessNoise
+from relnav.fusion.observers import simulate_observations
+from relnav.fusion.tracker import track_sequence
 
 N_LEO = mean_motion(6_778_137.0)
 SCENARIOS: dict[str, dict[str, Any]] = {

@@ -13,7 +13,7 @@ observation):
 * initial attitude error (the filter starts from a prior rotated by E about a random axis,
   with a prior 1σ of E; ``init="prior"``),
 * measurement noise (position and attitude noise together),
-* process noise: the default :class:`relnav.fusion.ukf.ProcessNoise` or a small one (a rigid
+* process noise: the default :class:`relnav.filtering.ukf.ProcessNoise` or a small one (a rigid
   body spinning at a constant rate), alone and with a fast spin / a large initial error.
 
 Reports, per condition, the RMS yaw (Euler z) error after the first ``--skip`` steps over all
@@ -34,7 +34,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from relnav.fusion.tracker import Tracker, simulate_observations
+from relnav.filtering.tracker import Tracker
+from relnav.fusion.observers import simulate_observations
 
 BASE: dict[str, Any] = {
     "rate": 5.0,
