@@ -33,6 +33,7 @@ _STATE = {"verbose": False}
 COMMAND_MODULES = [
     "demo",
     "simulate",
+    "export",
     "view",
     "odometry",
     "evaluate",
