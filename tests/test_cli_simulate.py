@@ -156,11 +156,11 @@ def test_simulate_help_lists_every_preset():
 def test_param_numbers_in_exponent_form_are_numbers(tmp_path):
     """YAML 1.1 reads 1e1 as a string: --param values still reach the scenario as numbers."""
     from relnav.cli.simulate import build_scenario
-    from relnav.sim.scenario import _parse_value
+    from relnav.sim.scenario import parse_value
 
-    assert _parse_value("1e1") == 10.0 and isinstance(_parse_value("1e1"), float)
-    assert _parse_value("1_000") == 1000 and _parse_value("2") == 2
-    assert _parse_value("y") == "y" and _parse_value("[1, 2e0]") == [1, 2.0]
+    assert parse_value("1e1") == 10.0 and isinstance(parse_value("1e1"), float)
+    assert parse_value("1_000") == 1000 and parse_value("2") == 2
+    assert parse_value("y") == "y" and parse_value("[1, 2e0]") == [1, 2.0]
     sc = build_scenario("sim-eoi", max_frames=2, params={"trajectory.params.semi_minor": "1e1"})
     assert sc.trajectory.params["semi_minor"] == 10.0
     sc = build_scenario("li-rotating", max_frames=2, params={"distance": "2.4e0"})

@@ -2,8 +2,8 @@
 
 The fixture (two procedural-target clouds, 1 500 float32 surface samples with exact normals,
 150 keypoints each, radius 10·Tr) and PCL's outputs were written by
-``benchmarks/paper1/pcl_reference/regenerate.py`` (see its docstring; PCL is not needed here). The bar is
-a median per-keypoint Pearson correlation ≥ 0.99 on each cloud (issue 16).
+``benchmarks/paper1/pcl_reference/regenerate.py`` (see its docstring; PCL is not needed here). The
+bar is a median per-keypoint Pearson correlation ≥ 0.99 on each cloud (issue 16).
 
 RoPS has two PCL references: ``rops`` (PCL's ``ROPSEstimation`` on PCL's greedy-projection mesh)
 and ``rops_local`` (PCL's ``ROPSEstimation`` at each keypoint alone, given that keypoint's local

@@ -250,19 +250,19 @@ def test_bad_arguments() -> None:
 def test_support_neighbourhoods_grid_and_kdtree_agree() -> None:
     from scipy.spatial import cKDTree
 
-    from relnav.geometry.lrf import _support_csr
+    from relnav.geometry.lrf import support_csr
 
     rng = np.random.default_rng(4)
     P = np.vstack([rng.normal(size=(300, 3)), np.tile([[0.5, 0.5, 0.5]], (4, 1))])  # + duplicates
     kp = np.array([0, 7, 300, 301, 150])
     ref = cKDTree(P).query_ball_point(P[kp], r=0.6)
     for tree in (None, cKDTree(P)):
-        flat, off = _support_csr(P, kp, 0.6, tree)
+        flat, off = support_csr(P, kp, 0.6, tree)
         for k in range(kp.size):
             assert sorted(flat[off[k] : off[k + 1]].tolist()) == sorted(ref[k])
     # a grid with more than 2^62 cells falls back to the kd-tree
     Q = np.array([[0.0, 0, 0], [1e-3, 0, 0], [1e20, 1e20, 1e20]])
-    flat, off = _support_csr(Q, np.array([0, 2]), 0.01)
+    flat, off = support_csr(Q, np.array([0, 2]), 0.01)
     assert sorted(flat[off[0] : off[1]].tolist()) == [0, 1] and flat[off[1] : off[2]].tolist() == [
         2
     ]

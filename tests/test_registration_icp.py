@@ -17,11 +17,11 @@ from relnav.registration.icp import (
     PAPER_TRANSLATION_TOL,
     KDTree,
     _jacobi_eigh,
-    _kabsch_pairs,
-    _point_information,
-    _reject_nb,
     information_ratio,
+    kabsch_pairs,
+    point_information,
     prepare_cloud,
+    reject_nb,
     reject_outliers,
 )
 
@@ -149,24 +149,24 @@ def test_kdtree_matches_ckdtree():
 def test_kd_knn_equals_ckdtree(n):
     """The numba k-NN (the navigator's map neighbourhoods) gives cKDTree's neighbours and the
     same distances to the bit; missing neighbours are (inf, -1)."""
-    from relnav.geometry.kdtree import _kd_build, _kd_knn
+    from relnav.geometry.kdtree import kd_build, kd_knn
 
     rng = np.random.default_rng(n)
     P = rng.normal(size=(n, 3))
     P[: n // 3] *= 0.01  # uneven density
     Q = np.concatenate([P[: min(n, 100)], rng.normal(size=(200, 3))])
     k = 10
-    d, i = _kd_knn(*_kd_build(P, 8), Q, k)
+    d, i = kd_knn(*kd_build(P, 8), Q, k)
     m = min(k, n)
     d_ref, i_ref = cKDTree(P).query(Q, k=m)
     assert np.array_equal(d[:, :m], d_ref.reshape(len(Q), m))
     assert np.array_equal(i[:, :m], i_ref.reshape(len(Q), m))
     assert np.isinf(d[:, m:]).all() and (i[:, m:] == -1).all()
     # within a bound: the same list cut where the distance reaches the bound
-    from relnav.geometry.kdtree import _kd_knn_within
+    from relnav.geometry.kdtree import kd_knn_within
 
     bound = np.full(len(Q), 0.3)
-    dw, iw = _kd_knn_within(*_kd_build(P, 8), Q, k, bound**2)
+    dw, iw = kd_knn_within(*kd_build(P, 8), Q, k, bound**2)
     keep = d < bound[:, None]
     assert np.array_equal(np.where(keep, d, np.inf), dw)
     assert np.array_equal(np.where(keep, i, -1), iw)
@@ -174,19 +174,19 @@ def test_kd_knn_equals_ckdtree(n):
 
 @pytest.mark.parametrize("n", [1, 9, 2000])
 def test_kd_build_select_is_kd_build_tree(n):
-    """The quickselect build gives _kd_build's nodes and splits, the same nearest neighbours."""
-    from relnav.geometry.kdtree import _kd_build, _kd_build_select, _kd_knn, _kd_query
+    """The quickselect build gives kd_build's nodes and splits, the same nearest neighbours."""
+    from relnav.geometry.kdtree import kd_build, kd_build_select, kd_knn, kd_query
 
     rng = np.random.default_rng(n)
     P = rng.normal(size=(n, 3))
     P[: n // 3] *= 0.01  # uneven density
-    a, b = _kd_build(P, 8), _kd_build_select(P, 8)
+    a, b = kd_build(P, 8), kd_build_select(P, 8)
     assert np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3])
     assert sorted(b[1]) == list(range(n)) and np.array_equal(b[0], P[b[1]])
     Q = rng.normal(size=(500, 3))
-    na, nb = _kd_query(*a, Q, np.eye(4), 0.5, False), _kd_query(*b, Q, np.eye(4), 0.5, False)
+    na, nb = kd_query(*a, Q, np.eye(4), 0.5, False), kd_query(*b, Q, np.eye(4), 0.5, False)
     assert all(np.array_equal(x, y) for x, y in zip(na, nb, strict=True))
-    ka, kb = _kd_knn(*a, Q, 5), _kd_knn(*b, Q, 5)
+    ka, kb = kd_knn(*a, Q, 5), kd_knn(*b, Q, 5)
     assert all(np.array_equal(x, y) for x, y in zip(ka, kb, strict=True))
 
 
@@ -200,13 +200,13 @@ def test_small_kernels_match_numpy():
     X = rng.normal(size=(40, 3))
     Y = transform_points(motion(rng, 120.0, 2.0), X) + 0.01 * rng.normal(size=(40, 3))
     idx = np.arange(40)
-    np.testing.assert_allclose(_kabsch_pairs(X, Y, idx, idx), kabsch(X, Y), atol=1e-12)
+    np.testing.assert_allclose(kabsch_pairs(X, Y, idx, idx), kabsch(X, Y), atol=1e-12)
     # a mirrored planar set must still give a proper rotation
     Xp = X.copy()
     Xp[:, 2] = 0.0
     Ym = Xp * [-1.0, 1.0, 1.0]
-    assert np.linalg.det(_kabsch_pairs(Xp, Ym, idx, idx)[:3, :3]) == pytest.approx(1.0)
-    info, _ = _point_information(X, Y, idx, idx)
+    assert np.linalg.det(kabsch_pairs(Xp, Ym, idx, idx)[:3, :3]) == pytest.approx(1.0)
+    info, _ = point_information(X, Y, idx, idx)
     ref = sum(np.hstack([np.eye(3), -hat(p)]).T @ np.hstack([np.eye(3), -hat(p)]) for p in X)
     np.testing.assert_allclose(info, ref, atol=1e-10)
 
@@ -223,7 +223,7 @@ def test_outlier_rules_known_answers():
     for _ in range(5):  # the compiled twin used inside the ICP loop agrees
         d3 = rng.exponential(size=int(rng.integers(1, 300)))
         for code, rule, f in ((0, "none", 0.0), (1, "std", 2.5), (2, "x84", 5.2)):
-            assert np.array_equal(_reject_nb(d3, code, f), reject_outliers(d3, rule, f))
+            assert np.array_equal(reject_nb(d3, code, f), reject_outliers(d3, rule, f))
 
 
 # --------------------------------------------------------------------------- known answers

@@ -33,7 +33,7 @@ import numpy as np
 
 from relnav.features.rops import rops
 from relnav.geometry import mean_resolution
-from relnav.geometry.lrf import _rops_lrf_csr, _support_csr
+from relnav.geometry.lrf import rops_lrf_csr, support_csr
 from relnav.io.pointclouds import read_points
 
 LRFS = ("local_mesh", "points")
@@ -73,11 +73,11 @@ def cpu_table(seqs: list[Path], frames: int) -> None:
             kp = np.arange(len(P))
             r = 20.0 * mean_resolution(P)
             sizes.append(len(P))
-            flat, off = _support_csr(P, kp, r)
+            flat, off = support_csr(P, kp, r)
             for lrf in res:
                 res[lrf].append(cpu_ms(lambda: rops(P, kp, radius=r, lrf=lrf)))  # noqa: B023
                 frame[lrf].append(
-                    cpu_ms(lambda: _rops_lrf_csr(P, kp, flat, off, r, None, 1e-10, lrf))  # noqa: B023
+                    cpu_ms(lambda: rops_lrf_csr(P, kp, flat, off, r, None, 1e-10, lrf))  # noqa: B023
                 )
         a = np.median(res["points"])
         b = np.median(res["local_mesh"])

@@ -4,12 +4,12 @@ Run:  python benchmarks/speed/bench_kdtree.py [--reps 30]
 
 Issue 14 keeps :mod:`relnav.geometry.kdtree` only if it is faster where ICP uses it. Each ICP
 iteration transforms the source by the current estimate and looks up the nearest target point of
-every source point within the gate (:func:`relnav.geometry.kdtree._kd_query`, called from the
+every source point within the gate (:func:`relnav.geometry.kdtree.kd_query`, called from the
 fused numba loop). Measured here on pairs of simulated scans (VLP-16 and HDL-64 of the
 procedural Envisat, 15 m; the HPR sampler at 4000 points), single thread, median over ``--reps``:
 
 * **query**: the transform + nearest neighbour within the gate of one iteration —
-  numba ``_kd_query`` vs ``cKDTree.query(X, distance_upper_bound=gate, workers=1)`` vs
+  numba ``kd_query`` vs ``cKDTree.query(X, distance_upper_bound=gate, workers=1)`` vs
   ``pykdtree`` (``OMP_NUM_THREADS=1``), the transform done in NumPy for the last two;
 * **build**: the tree of the target cloud (once per scan in odometry);
 * both together for one 20-iteration ``icp-point`` call (one build + 20 queries).
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.geometry.kdtree import KDTree, _kd_query
+from relnav.geometry.kdtree import KDTree, kd_query
 from relnav.geometry.neighbors import mean_resolution
 from relnav.geometry.se3 import exp_se3
 from relnav.sim.sensors import make_sensor
@@ -67,14 +67,14 @@ def measure(A: np.ndarray, B: np.ndarray, T: np.ndarray, reps: int, py_tree: Any
     tree = KDTree(A)
     ck = cKDTree(A)
     X = B @ T[:3, :3].T + T[:3, 3]
-    _, i_nb, d_nb = _kd_query(tree._Pp, tree._perm, tree._dim, tree._val, B, T, gate, False)
+    _, i_nb, d_nb = kd_query(tree._Pp, tree._perm, tree._dim, tree._val, B, T, gate, False)
     d_ck, _ = ck.query(X, k=1, distance_upper_bound=gate, workers=1)
     hit = i_nb >= 0
     assert np.array_equal(hit, np.isfinite(d_ck)), "numba and cKDTree disagree on the gate"
     assert np.allclose(d_nb[hit], d_ck[hit], rtol=0, atol=1e-12)
     out = [
         median_time(
-            lambda: _kd_query(tree._Pp, tree._perm, tree._dim, tree._val, B, T, gate, False),
+            lambda: kd_query(tree._Pp, tree._perm, tree._dim, tree._val, B, T, gate, False),
             reps,
         ),
         median_time(

@@ -44,9 +44,9 @@ def build_scenario(
                 f"{', '.join(allowed) or '(none)'}; scenario fields use dotted keys "
                 "(e.g. trajectory.params.loops=3)"
             )
-        from relnav.sim.scenario import _parse_value
+        from relnav.sim.scenario import parse_value
 
-        opts = {k: _parse_value(v) for k, v in plain.items()}
+        opts = {k: parse_value(v) for k, v in plain.items()}
         kwargs: dict[str, Any] = {}
         if scale_to is not None:
             kwargs["scale_to"] = scale_to

@@ -18,8 +18,8 @@ the state settles, in whitened coordinates with one normaliser for the whole set
 is the mean of its iterates (``average``): the converged filter is then close to the fit
 weighted by ``α_u``. Measured on the same GCC correspondences (fixed model cloud with the
 presets' 1 cm noise, first 30 frames of the five HPR presets × six descriptors,
-``benchmarks/paper1/paper1_estimators_same_corr.py``): the four converged filters' T_error are within
-2× of each other on 24 of 30 pairs (one sweep: 10 of 30).
+``benchmarks/paper1/paper1_estimators_same_corr.py``): the four converged filters' T_error are
+within 2× of each other on 24 of 30 pairs (one sweep: 10 of 30).
 
 ``paper_literal=True`` implements the printed eqs. 22–25 verbatim::
 

@@ -21,6 +21,7 @@ __all__ = [
     "EstimateStatus",
     "TransformEstimator",
     "available_estimators",
+    "estimator_factory",
     "get_estimator",
     "options_repr",
     "register_estimator",
@@ -90,6 +91,13 @@ def available_estimators() -> dict[str, str]:
     """Registered estimator names with their one-line description."""
     _load_all()
     return {k: v[1] for k, v in _REGISTRY.items()}
+
+
+def estimator_factory(name: str) -> Callable[..., TransformEstimator] | None:
+    """The factory (class) registered as estimator ``name``, ``None`` if there is none."""
+    _load_all()
+    entry = _REGISTRY.get(name)
+    return None if entry is None else entry[0]
 
 
 def get_estimator(name: str, **options: object) -> TransformEstimator:

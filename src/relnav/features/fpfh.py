@@ -43,7 +43,7 @@ from numba import njit
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
-from relnav.geometry.lrf import _grid_build, _grid_query
+from relnav.geometry.lrf import grid_build, grid_query
 
 __all__ = ["FPFH_DIM", "fpfh", "pair_features"]
 
@@ -139,7 +139,7 @@ def _fpfh_kernel(
     n = P.shape[0]
     K = kp.shape[0]
     out = np.full((K, FPFH_DIM), np.nan, dtype=np.float32)
-    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
+    lo, h, dims, start, sidx, spts = grid_build(P, radius)
     bi = np.empty(n, dtype=np.int64)
     bd = np.empty(n)
     valid_n = np.empty(n, dtype=np.bool_)
@@ -158,7 +158,7 @@ def _fpfh_kernel(
         ri = row[i]
         if ri < 0 or not valid_n[i]:
             continue
-        m = _grid_query(spts, lo, h, dims, start, sidx, P[i], radius, bi, bd)
+        m = grid_query(spts, lo, h, dims, start, sidx, P[i], radius, bi, bd)
         cnt[:] = 0
         nvalid = 0
         for t in range(m):
@@ -192,7 +192,7 @@ def _fpfh_kernel(
     acc = np.zeros(FPFH_DIM)
     for k in range(K):
         i = kp[k]
-        m = _grid_query(spts, lo, h, dims, start, sidx, P[i], radius, bi, bd)
+        m = grid_query(spts, lo, h, dims, start, sidx, P[i], radius, bi, bd)
         if m < min_support:
             continue
         acc[:] = 0.0
@@ -246,12 +246,12 @@ def _needed(P: np.ndarray, kp: np.ndarray, radius: float) -> np.ndarray:
     """Mask of the points whose SPFH is needed: the keypoints and their neighbours."""
     n = P.shape[0]
     need = np.zeros(n, dtype=np.bool_)
-    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
+    lo, h, dims, start, sidx, spts = grid_build(P, radius)
     bi = np.empty(n, dtype=np.int64)
     bd = np.empty(n)
     for k in range(kp.shape[0]):
         need[kp[k]] = True
-        m = _grid_query(spts, lo, h, dims, start, sidx, P[kp[k]], radius, bi, bd)
+        m = grid_query(spts, lo, h, dims, start, sidx, P[kp[k]], radius, bi, bd)
         for t in range(m):
             need[bi[t]] = True
     return need

@@ -112,7 +112,7 @@ from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
-from relnav.geometry.lrf import _grid_build, _grid_query
+from relnav.geometry.lrf import grid_build, grid_query
 
 __all__ = ["HOD_COARSE_BINS", "HOD_FINE_BINS", "hod", "hod_histograms", "hods", "visit_order"]
 
@@ -251,7 +251,7 @@ def _hod_incremental(
     K = centres.shape[0]
     out = np.full((K, nc + nf), np.nan, dtype=np.float32)
     sizes = np.zeros(K, dtype=np.int64)
-    lo, h, dims, start, sidx, spts = _grid_build(cloud, radius)
+    lo, h, dims, start, sidx, spts = grid_build(cloud, radius)
     M1 = max(M, 1)
     buf = np.empty(M1, dtype=np.int64)
     bd = np.empty(M1)
@@ -270,7 +270,7 @@ def _hod_incremental(
     for t in range(K):
         k = order[t]
         q = centres[k]
-        nT = _grid_query(spts, lo, h, dims, start, sidx, q, radius, buf, bd)
+        nT = grid_query(spts, lo, h, dims, start, sidx, q, radius, buf, bd)
         s = t + 1
         for i in range(nT):
             stamp[buf[i]] = s
@@ -361,7 +361,7 @@ def _hod_brute(
     sizes of the ``which`` keypoints.
     """
     M = cloud.shape[0]
-    lo, h, dims, start, sidx, spts = _grid_build(cloud, radius)
+    lo, h, dims, start, sidx, spts = grid_build(cloud, radius)
     M1 = max(M, 1) + 1
     buf = np.empty(M1, dtype=np.int64)
     bd = np.empty(M1)
@@ -374,7 +374,7 @@ def _hod_brute(
     for w in range(which.shape[0]):
         k = which[w]
         q = centres[k]
-        n = _grid_query(spts, lo, h, dims, start, sidx, q, radius, buf, bd)
+        n = grid_query(spts, lo, h, dims, start, sidx, q, radius, buf, bd)
         for i in range(n):
             mx[i] = cloud[buf[i], 0]
             my[i] = cloud[buf[i], 1]
@@ -419,12 +419,12 @@ def _poisson_anchors(C: np.ndarray, spacing: float) -> np.ndarray:
     motion invariant).
     """
     K = C.shape[0]
-    lo, h, dims, start, sidx, spts = _grid_build(C, spacing)
+    lo, h, dims, start, sidx, spts = grid_build(C, spacing)
     acc = np.zeros(K, dtype=np.bool_)
     bi = np.empty(max(K, 1), dtype=np.int64)
     bd = np.empty(max(K, 1))
     for k in range(K):
-        m = _grid_query(spts, lo, h, dims, start, sidx, C[k], spacing, bi, bd)
+        m = grid_query(spts, lo, h, dims, start, sidx, C[k], spacing, bi, bd)
         ok = True
         for t in range(m):
             if acc[bi[t]]:
@@ -462,19 +462,19 @@ def _blend(H: np.ndarray, nn: np.ndarray, w: np.ndarray, valid: np.ndarray):
 
 @njit(cache=True)
 def _support_sizes_kernel(P: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
-    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
+    lo, h, dims, start, sidx, spts = grid_build(P, radius)
     buf = np.empty(max(P.shape[0], 1), dtype=np.int64)
     bd = np.empty(max(P.shape[0], 1))
     out = np.zeros(centres.shape[0], dtype=np.int64)
     for k in range(centres.shape[0]):
-        out[k] = _grid_query(spts, lo, h, dims, start, sidx, centres[k], radius, buf, bd)
+        out[k] = grid_query(spts, lo, h, dims, start, sidx, centres[k], radius, buf, bd)
     return out
 
 
 @njit(cache=True)
 def _support_at_least(P: np.ndarray, centres: np.ndarray, radius: float, need: int) -> np.ndarray:
     """Whether each centre has at least ``need`` points within ``radius`` (early exit)."""
-    lo, h, dims, start, _, spts = _grid_build(P, radius)
+    lo, h, dims, start, _, spts = grid_build(P, radius)
     r2 = radius * radius
     K = centres.shape[0]
     out = np.zeros(K, dtype=np.bool_)
@@ -519,13 +519,13 @@ def _hod_keypoint_pairs(
     """
     K = kp.shape[0]
     out = np.full((K, nc + nf), np.nan, dtype=np.float32)
-    lo, h, dims, start, sidx, spts = _grid_build(P, r)
+    lo, h, dims, start, sidx, spts = grid_build(P, r)
     nbr = np.empty(P.shape[0], dtype=np.int64)
     d2 = np.empty(P.shape[0], dtype=np.float64)
     hist = np.zeros(_NF, dtype=np.int64)
     for k in range(K):
         q = P[kp[k]]
-        n = _grid_query(spts, lo, h, dims, start, sidx, q, r, nbr, d2)
+        n = grid_query(spts, lo, h, dims, start, sidx, q, r, nbr, d2)
         if n < min_support:
             continue
         hist[:] = 0

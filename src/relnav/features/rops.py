@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
-from relnav.geometry.lrf import _check_points, _rops_lrf_csr, _support_csr, check_rops_lrf
+from relnav.geometry.lrf import check_points, check_rops_lrf, rops_lrf_csr, support_csr
 from relnav.geometry.rotations import rotvec_to_matrix
 
 __all__ = ["rops", "rops_rotations"]
@@ -239,7 +239,7 @@ def rops(
         L1-normalised descriptors; NaN rows for fewer than 5 support points (keypoint included)
         or an undefined LRF.
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     if not (np.isfinite(radius) and radius > 0):
         raise InputError(f"RoPS radius must be positive and finite, got {radius}")
     if int(n_bins) < 1:
@@ -256,8 +256,8 @@ def rops(
     if kp.size == 0:
         return np.zeros((0, dim), dtype=np.float32)
     radius = float(radius)
-    flat, offsets = _support_csr(P, kp, radius, tree)
-    lrfs = _rops_lrf_csr(
+    flat, offsets = support_csr(P, kp, radius, tree)
+    lrfs = rops_lrf_csr(
         P, kp, flat, offsets, radius, triangles, float(degenerate_tol), lrf, max_edge, tree
     )
     out = _rops_kernel(

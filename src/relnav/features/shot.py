@@ -36,7 +36,7 @@ from numba import njit
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import register_descriptor
-from relnav.geometry.lrf import SHOT_MIN_NEIGHBORS, _grid_build, _grid_query, _shot_lrf_one
+from relnav.geometry.lrf import SHOT_MIN_NEIGHBORS, grid_build, grid_query, shot_lrf_one
 
 __all__ = ["SHOT_DIM", "shot"]
 
@@ -238,7 +238,7 @@ def _shot_kernel(
     n = P.shape[0]
     K = kp.shape[0]
     out = np.full((K, SHOT_DIM), np.nan, dtype=np.float32)
-    lo, h, dims, start, sidx, spts = _grid_build(P, max(radius, lrf_radius))
+    lo, h, dims, start, sidx, spts = grid_build(P, max(radius, lrf_radius))
     bi = np.empty(n, dtype=np.int64)
     bd = np.empty(n)
     V = np.empty((n, 3))
@@ -251,11 +251,11 @@ def _shot_kernel(
     r_half = radius / 2.0
     for k in range(K):
         p = P[kp[k]]
-        m = _grid_query(spts, lo, h, dims, start, sidx, p, lrf_radius, bi, bd)
-        if not _shot_lrf_one(P, p, bi, bd, m, lrf_radius, min_nb, V, vd2, vid, frame, tie):
+        m = grid_query(spts, lo, h, dims, start, sidx, p, lrf_radius, bi, bd)
+        if not shot_lrf_one(P, p, bi, bd, m, lrf_radius, min_nb, V, vd2, vid, frame, tie):
             continue
         if not same:
-            m = _grid_query(spts, lo, h, dims, start, sidx, p, radius, bi, bd)
+            m = grid_query(spts, lo, h, dims, start, sidx, p, radius, bi, bd)
         hist[:] = 0.0
         for t in range(m):
             d2 = bd[t]

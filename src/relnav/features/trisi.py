@@ -54,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from relnav.errors import ConfigError, InputError
 from relnav.features.base import MIN_SUPPORT, register_descriptor
-from relnav.geometry.lrf import _check_points, _rops_lrf_csr, _support_csr, check_rops_lrf
+from relnav.geometry.lrf import check_points, check_rops_lrf, rops_lrf_csr, support_csr
 
 __all__ = ["SpinGrid", "spin", "spin_grid", "trisi"]
 
@@ -276,15 +276,15 @@ def trisi(
         ``[x-image, y-image, z-image]``, each summing to 1; NaN rows for fewer than 5 support
         points (keypoint included) or an undefined LRF.
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     radius = _check_radius(radius, "TriSI")
     grid = spin_grid(radius, layout="guo", n_alpha=n_alpha, n_beta=n_beta)
     bilinear = _interp_flag(interpolation)
     check_rops_lrf(lrf, None)
     if kp.size == 0:
         return np.zeros((0, 3 * grid.size), dtype=np.float32)
-    flat, offsets = _support_csr(P, kp, radius, tree)
-    lrfs = _rops_lrf_csr(
+    flat, offsets = support_csr(P, kp, radius, tree)
+    lrfs = rops_lrf_csr(
         P, kp, flat, offsets, radius, triangles, float(degenerate_tol), lrf, None, tree
     )
     valid = np.isfinite(lrfs).all(axis=(1, 2)) & (np.diff(offsets) >= MIN_SUPPORT)
@@ -364,7 +364,7 @@ def spin(
         Unit-sum images; NaN rows for fewer than 5 support points (keypoint included), a
         non-finite keypoint normal or (``"pcl"``) no point left in the cylinder.
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     radius = _check_radius(radius, "spin image")
     if normals is None:
         raise InputError("spin image needs normals")
@@ -375,7 +375,7 @@ def spin(
     bilinear = _interp_flag(interpolation)
     if kp.size == 0:
         return np.zeros((0, grid.size), dtype=np.float32)
-    flat, offsets = _support_csr(P, kp, radius, tree)
+    flat, offsets = support_csr(P, kp, radius, tree)
     n_kp = Nrm[kp]
     norm = np.linalg.norm(n_kp, axis=1)
     valid = np.isfinite(n_kp).all(axis=1) & (norm > 0) & (np.diff(offsets) >= MIN_SUPPORT)

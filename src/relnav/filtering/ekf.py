@@ -39,11 +39,11 @@ from relnav.filtering.pose_filter import (
     PAPER2_RATE_HZ,
     PoseFilter,
     UpdateInfo,
-    _canon_q,
     _sym,
+    canon_q,
     quat_delta,
 )
-from relnav.geometry.dualquat import _qmul
+from relnav.geometry.dualquat import qmul
 from relnav.geometry.rotations import hat, rotvec_to_matrix
 
 __all__ = ["QuaternionEKF"]
@@ -146,12 +146,12 @@ class QuaternionEKF(PoseFilter):
 
     def _predict(self, dt: float) -> None:
         F = self.transition_jacobian(dt)  # at the prior ω (constant over the step)
-        self._q = _canon_q(_qmul(self._q, quat_delta(self._w, dt)))
+        self._q = canon_q(qmul(self._q, quat_delta(self._w, dt)))
         self._d, self._v = self.dynamics.propagate(self._d, self._v, dt)
         self._P = _sym(F @ self._P @ F.T + np.diag(self._phys_process_var(dt)))
 
     def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
-        dq = _canon_q(_qmul(self._q * np.array([-1.0, -1.0, -1.0, 1.0]), q_meas))
+        dq = canon_q(qmul(self._q * np.array([-1.0, -1.0, -1.0, 1.0]), q_meas))
         nu = np.concatenate([p - self._d, 2.0 * dq[:3]])
         H = np.zeros((6, 12))
         H[0:3, 0:3] = np.eye(3)
@@ -172,7 +172,7 @@ class QuaternionEKF(PoseFilter):
         self._d = self._d + dx[0:3]
         self._v = self._v + dx[3:6]
         dth = dx[6:9]
-        self._q = _canon_q(_qmul(self._q, np.r_[0.5 * dth, 1.0]))
+        self._q = canon_q(qmul(self._q, np.r_[0.5 * dth, 1.0]))
         self._w = self._w + dx[9:12]
         self._P = _sym(P)
         return UpdateInfo(True, nis, nu, "", S, R)

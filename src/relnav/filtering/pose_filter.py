@@ -22,7 +22,7 @@ from relnav.errors import ConfigError, InputError
 from relnav.filtering.dynamics import ClohessyWiltshire, TranslationModel
 from relnav.filtering.noise import InitialUncertainty, MeasurementNoise, ProcessNoise, _coerce
 from relnav.geometry.dualquat import (
-    _qmul,
+    qmul,
 )
 from relnav.geometry.rotations import quat_to_matrix
 
@@ -88,7 +88,7 @@ def quat_delta(omega: np.ndarray, dt: float) -> np.ndarray:
     return np.concatenate([k * th, np.cos(half)], axis=-1)
 
 
-def _canon_q(q: np.ndarray) -> np.ndarray:
+def canon_q(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., 3:4] < 0.0, -q, q)
@@ -96,8 +96,8 @@ def _canon_q(q: np.ndarray) -> np.ndarray:
 
 def _rotvec_between(q: np.ndarray, q_true: np.ndarray) -> np.ndarray:
     """Body-frame rotation vector of ``q⁻¹ ⊗ q_true`` (rad)."""
-    dq = _qmul(q * np.array([-1.0, -1.0, -1.0, 1.0]), q_true)
-    return Rotation.from_quat(_canon_q(dq)).as_rotvec()
+    dq = qmul(q * np.array([-1.0, -1.0, -1.0, 1.0]), q_true)
+    return Rotation.from_quat(canon_q(dq)).as_rotvec()
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -260,7 +260,7 @@ class PoseFilter:
             raise InputError("initial state must be finite with a non-zero quaternion")
         if p0 is not None:
             self.p0 = _coerce(InitialUncertainty, p0, "p0")
-        self._d, self._v, self._q, self._w = d.copy(), v.copy(), _canon_q(q), w.copy()
+        self._d, self._v, self._q, self._w = d.copy(), v.copy(), canon_q(q), w.copy()
         s = self.p0
         phys = np.repeat(np.array([s.position, s.velocity, s.attitude, s.omega]) ** 2, 3)
         self._P = self._native_from_phys_var(phys)
@@ -288,7 +288,7 @@ class PoseFilter:
         """Mean reference point ``(3,)`` and attitude ``(4,)`` xyzw predicted ``dt`` s ahead
         (the filter is not changed)."""
         dt = max(float(dt), 0.0)
-        q = _canon_q(_qmul(self._q, quat_delta(self._w, dt)))
+        q = canon_q(qmul(self._q, quat_delta(self._w, dt)))
         return self.dynamics.propagate(self._d, self._v, dt)[0], q
 
     @property

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from relnav.geometry.dualquat import _qmul
+from relnav.geometry.dualquat import qmul
 
 __all__ = ["STATE_BLOCKS", "TrackResult", "TrackTruth"]
 
@@ -51,7 +51,7 @@ def _body_rates(times: np.ndarray, quats: np.ndarray) -> np.ndarray:
     w = np.full((K, 3), np.nan)
     if K < 2:
         return w
-    dq = _qmul(quats[:-1] * _QCONJ, quats[1:])
+    dq = qmul(quats[:-1] * _QCONJ, quats[1:])
     dq = np.where(dq[:, 3:4] < 0, -dq, dq)
     dt = np.diff(times)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -222,7 +222,7 @@ class TrackResult:
         att = np.full((len(self), 3), np.nan)
         ok = np.all(np.isfinite(self.quat), axis=1)
         if np.any(ok):
-            dq = _qmul(t.quat[ok] * _QCONJ, self.quat[ok])
+            dq = qmul(t.quat[ok] * _QCONJ, self.quat[ok])
             dq = np.where(dq[:, 3:4] < 0, -dq, dq)
             att[ok] = Rotation.from_quat(dq).as_rotvec()
         de = self.euler - t.euler

@@ -72,17 +72,17 @@ from relnav.filtering.pose_filter import (
     PAPER2_RATE_HZ,
     PoseFilter,
     UpdateInfo,
-    _canon_q,
     _sqrt_psd,
     _sym,
+    canon_q,
     quat_delta,
 )
 from relnav.geometry.dualquat import (
-    _qmul,
     cayley,
     dq_conjugate,
     dq_from_rt,
     dq_multiply,
+    qmul,
     quat_cayley,
     quat_cayley_inverse,
     quat_cayley_mean,
@@ -603,7 +603,7 @@ class TwistorUKF(PoseFilter):
         """
         d = self._d + chi[:, 0:3]
         v = self._v + chi[:, 3:6]
-        q = _canon_q(_qmul(self._q, quat_cayley_inverse(chi[:, 6:9])))
+        q = canon_q(qmul(self._q, quat_cayley_inverse(chi[:, 6:9])))
         w = self._w + chi[:, 12:15]
         return d, v, q, w
 
@@ -628,10 +628,10 @@ class TwistorUKF(PoseFilter):
         # propagate: attitude by body rates (right multiplication), translation by CW
         if self.inertia is not None:
             w_end = euler_rates(w, self.inertia, dt)
-            q = _canon_q(_qmul(q, quat_delta(0.5 * (w + w_end), dt)))
+            q = canon_q(qmul(q, quat_delta(0.5 * (w + w_end), dt)))
             w = w_end
         else:
-            q = _canon_q(_qmul(q, quat_delta(w, dt)))
+            q = canon_q(qmul(q, quat_delta(w, dt)))
         s = np.concatenate([d, v], axis=1) @ self.dynamics.stm(dt).T
         d, v = s[:, :3], s[:, 3:]
         d_m = self.Wm @ d
@@ -681,7 +681,7 @@ class TwistorUKF(PoseFilter):
         """Measurement coordinates of poses ``(d, q)`` relative to the predicted pose."""
         if self.innovation == "position+rotation":
             conj = self._q * np.array([-1.0, -1.0, -1.0, 1.0])
-            return np.concatenate([d, quat_cayley(_qmul(conj, q))], axis=-1)
+            return np.concatenate([d, quat_cayley(qmul(conj, q))], axis=-1)
         return cayley(dq_multiply(dq_conjugate(self._pose_dq()), dq_from_rt(q, d)))
 
     def _update(self, p: np.ndarray, q_meas: np.ndarray, R: np.ndarray) -> UpdateInfo:
@@ -731,11 +731,11 @@ class TwistorUKF(PoseFilter):
                     d_i = d_i + np.einsum("nij,nj->ni", quat_to_matrix(q_i), b[:, 0:3])
                 else:
                     d_i = d_i + b[:, 0:3]
-                q_i = _canon_q(_qmul(q_i, quat_delta(b[:, 3:6], 1.0)))
+                q_i = canon_q(qmul(q_i, quat_delta(b[:, 3:6], 1.0)))
             if combo is not None:
                 g = sum(w * (self._m[i] + dX[:, self._slot_rows(i)]) for i, w in combo)
                 d_i = d_i + np.einsum("nij,nj->ni", quat_to_matrix(q_i), g[:, 0:3])
-                q_i = _canon_q(_qmul(q_i, quat_delta(g[:, 3:6], 1.0)))
+                q_i = canon_q(qmul(q_i, quat_delta(g[:, 3:6], 1.0)))
         Z = self._meas_of(d_i, q_i)
         z_hat = self.Wm @ Z
         dZ = Z - z_hat
@@ -818,7 +818,7 @@ class TwistorUKF(PoseFilter):
         self._d = self._d + dx[0:3]
         self._v = self._v + dx[3:6]
         # q̂ ← q̂ ⊗ cayley⁻¹(δB); its translation is then rebuilt from the updated d
-        self._q = _canon_q(_qmul(self._q, quat_cayley_inverse(dx[6:9])))
+        self._q = canon_q(qmul(self._q, quat_cayley_inverse(dx[6:9])))
         self._w = self._w + dx[12:15]
         if self.centre_offset:
             self._c = self._c + dx[15:18]

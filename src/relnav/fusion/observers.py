@@ -22,7 +22,7 @@ from relnav.filtering.dynamics import ClohessyWiltshire
 from relnav.filtering.pose_filter import quat_delta
 from relnav.filtering.track_result import TrackTruth
 from relnav.filtering.tracker import Observation
-from relnav.geometry.dualquat import _qmul
+from relnav.geometry.dualquat import qmul
 from relnav.geometry.rotations import project_to_so3, quat_to_matrix
 from relnav.geometry.se3 import invert
 
@@ -129,12 +129,12 @@ def simulate_observations(
     qd = quat_delta(w, dt)
     for k in range(K):
         P[k], V[k], Qs[k] = d, v, (q if q[3] >= 0 else -q)
-        q = _qmul(q, qd)
+        q = qmul(q, qd)
         q = q / np.linalg.norm(q)
         d, v = cw.propagate(d, v, dt)
     noise_p = rng.normal(size=(K, 3)) * sigma_position
     noise_q = Rotation.from_rotvec(rng.normal(size=(K, 3)) * math.radians(sigma_attitude_deg))
-    zq = _qmul(Qs, noise_q.as_quat())
+    zq = qmul(Qs, noise_q.as_quat())
     c = np.asarray(offset, dtype=np.float64).reshape(3)
     Rk = quat_to_matrix(Qs)
     ref = P + Rk @ c
@@ -183,7 +183,7 @@ def _simulate_merged(
     for k, o in enumerate(exact):
         assert o is not None
         Rk = quat_to_matrix(o.quat_xyzw)
-        q = _qmul(o.quat_xyzw, quat_delta(e[k, 3:], 1.0))
+        q = qmul(o.quat_xyzw, quat_delta(e[k, 3:], 1.0))
         cov = np.diag(sig**2)
         cov[0:3, 0:3] = Rk @ cov[0:3, 0:3] @ Rk.T
         sources = {int(j): float(W[k, j]) for j in np.flatnonzero(W[k] > 0.0)}

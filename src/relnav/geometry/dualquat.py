@@ -58,7 +58,7 @@ def _as_dq(a: np.ndarray, name: str = "dual quaternion") -> np.ndarray:
     return a
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of ``(..., 4)`` xyzw quaternions (same as ``rotations.quat_multiply``,
     without its axis shuffling: this is the hot path of the UKF)."""
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
@@ -93,8 +93,8 @@ def dq_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Product ``a ⊗ b = a_r b_r + ε (a_r b_d + a_d b_r)`` of dual quaternions ``(..., 8)``."""
     a = _as_dq(a)
     b = _as_dq(b)
-    real = _qmul(a[..., :4], b[..., :4])
-    dual = _qmul(a[..., :4], b[..., 4:]) + _qmul(a[..., 4:], b[..., :4])
+    real = qmul(a[..., :4], b[..., :4])
+    dual = qmul(a[..., :4], b[..., 4:]) + qmul(a[..., 4:], b[..., :4])
     return np.concatenate([real, dual], axis=-1)
 
 
@@ -108,7 +108,7 @@ def dq_inverse(a: np.ndarray) -> np.ndarray:
     """General inverse ``q⁻¹ − ε q⁻¹ q_d q⁻¹`` (requires a non-zero real part)."""
     a = _as_dq(a)
     ri = quat_inverse(a[..., :4])
-    di = -_qmul(_qmul(ri, a[..., 4:]), ri)
+    di = -qmul(qmul(ri, a[..., 4:]), ri)
     return np.concatenate([ri, di], axis=-1)
 
 
@@ -154,7 +154,7 @@ def dq_from_rt(quat_xyzw: np.ndarray, t: np.ndarray) -> np.ndarray:
         raise InputError(f"expected quaternion (..., 4) and translation (..., 3), got {q.shape}")
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     tq = np.concatenate([t, np.zeros((*t.shape[:-1], 1))], axis=-1)
-    qd = 0.5 * _qmul(tq, q)
+    qd = 0.5 * qmul(tq, q)
     q, qd = np.broadcast_arrays(q, qd)
     return np.concatenate([q, qd], axis=-1)
 
@@ -162,7 +162,7 @@ def dq_from_rt(quat_xyzw: np.ndarray, t: np.ndarray) -> np.ndarray:
 def dq_to_rt(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation quaternion ``(..., 4)`` (``w ≥ 0``) and translation ``2 q_d ⊗ q*`` ``(..., 3)``."""
     a = _as_dq(a)
-    t = 2.0 * _qmul(a[..., 4:], quat_conjugate(a[..., :4]))[..., :3]
+    t = 2.0 * qmul(a[..., 4:], quat_conjugate(a[..., :4]))[..., :3]
     q = a[..., :4]
     q = np.where(q[..., 3:4] < 0.0, -q, q)
     return q, t
@@ -241,7 +241,7 @@ def cayley(
         inv_qp1 = quat_inverse(qp1)
         br = q[..., :3] / qp1[..., 3:4]
         one_m_br = np.concatenate([-br, np.ones((*br.shape[:-1], 1))], axis=-1)
-        bd = _qmul(_qmul(one_m_br, a[..., 4:]), inv_qp1)[..., :3]
+        bd = qmul(qmul(one_m_br, a[..., 4:]), inv_qp1)[..., :3]
     return np.concatenate([br, bd], axis=-1)
 
 
@@ -263,7 +263,7 @@ def cayley_inverse(B: np.ndarray, *, general: bool = False) -> np.ndarray:
     inv_1mb = np.concatenate([br[..., :3], np.ones((*br.shape[:-1], 1))], axis=-1) / den
     qp1 = q.copy()
     qp1[..., 3] += 1.0
-    qd = _qmul(_qmul(qp1, Bq[..., 4:]), inv_1mb)
+    qd = qmul(qmul(qp1, Bq[..., 4:]), inv_1mb)
     return np.concatenate([q, qd], axis=-1)
 
 
@@ -362,8 +362,8 @@ def quat_cayley_mean(
     mean = np.asarray(X[0] if init is None else init, dtype=np.float64).reshape(4)
     mean = mean / np.linalg.norm(mean)
     for it in range(1, max_iter + 1):
-        bbar = w @ quat_cayley(_qmul(quat_conjugate(mean), X))
-        mean = _qmul(mean, quat_cayley_inverse(bbar))
+        bbar = w @ quat_cayley(qmul(quat_conjugate(mean), X))
+        mean = qmul(mean, quat_cayley_inverse(bbar))
         mean = mean / np.linalg.norm(mean)
         if float(np.linalg.norm(bbar)) < tol:
             return (-mean if mean[3] < 0 else mean), it, True

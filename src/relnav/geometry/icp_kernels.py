@@ -16,14 +16,14 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh
-from relnav.geometry.kdtree import _kd_query
+from relnav.geometry.kdtree import kd_query
 from relnav.geometry.rotations import hat
 
 __all__ = ["information_ratio", "reject_outliers"]
 
 
 @njit(cache=True)
-def _transform(P: np.ndarray, T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def transform_nb(P: np.ndarray, T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     n = P.shape[0]
     out = np.empty((n, 3))
     for i in range(n):
@@ -34,7 +34,7 @@ def _transform(P: np.ndarray, T: np.ndarray) -> np.ndarray:  # pragma: no cover 
 
 
 @njit(cache=True)
-def _horn_rotation(H: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def horn_rotation(H: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """Proper rotation ``R`` maximising ``tr(R H)`` for ``H = Σ (x − x̄)(y − ȳ)ᵀ`` (Horn 1987).
 
     Same minimiser as Arun/Umeyama SVD with the reflection guard; ``y ≈ R x``.
@@ -78,7 +78,7 @@ def _horn_rotation(H: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _kabsch_pairs(
+def kabsch_pairs(
     X: np.ndarray, Y: np.ndarray, src_idx: np.ndarray, tgt_idx: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - numba
     """Rigid transform ``T`` (4x4) with ``Y[tgt] ≈ R X[src] + t`` (least squares, Horn)."""
@@ -101,7 +101,7 @@ def _kabsch_pairs(
             xa = X[i, a] - mx[a]
             for b in range(3):
                 H[a, b] += xa * (Y[j, b] - my[b])
-    R = _horn_rotation(H)
+    R = horn_rotation(H)
     T = np.eye(4)
     for a in range(3):
         ta = my[a]
@@ -154,7 +154,7 @@ def _plane_system(
 
 
 @njit(cache=True)
-def _point_information(
+def point_information(
     X: np.ndarray, Y: np.ndarray, src_idx: np.ndarray, tgt_idx: np.ndarray
 ) -> tuple[np.ndarray, float]:  # pragma: no cover - numba
     """``Σ JᵀJ`` (6x6, order [ρ, φ]) with ``J = [I, −[p]×]``, and ``Σ|p − y|²``.
@@ -203,7 +203,7 @@ def _point_information(
 
 
 @njit(cache=True)
-def _rodrigues_nb(w: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def rodrigues_nb(w: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """Rotation matrix of the rotation vector ``w`` (plain loops)."""
     th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     K = np.zeros((3, 3))
@@ -264,7 +264,7 @@ def _valid_pairs(
 
 
 @njit(cache=True)
-def _reject_nb(d: np.ndarray, rule: int, factor: float) -> np.ndarray:  # pragma: no cover
+def reject_nb(d: np.ndarray, rule: int, factor: float) -> np.ndarray:  # pragma: no cover
     """Numba twin of :func:`reject_outliers` (rule 0 none, 1 std, 2 x84)."""
     keep = np.ones(d.shape[0], dtype=np.bool_)
     if rule == 0 or d.shape[0] == 0:
@@ -315,7 +315,7 @@ def _icp_loop(
     """
     n = P.shape[0]
     T = T0.copy()
-    X, j, d = _kd_query(Pp, perm, sdim, sval, P, T, gate, False)
+    X, j, d = kd_query(Pp, perm, sdim, sval, P, T, gate, False)
     si, ti, dd = _valid_pairs(j, d, N, plane)
     fit_prev = si.shape[0] / n
     rmse_prev = math.sqrt(np.mean(dd**2)) if dd.shape[0] else 0.0
@@ -325,7 +325,7 @@ def _icp_loop(
     status = 0
     n_iter = 0
     for it in range(1, max_iter + 1):
-        keep = _reject_nb(dd, rule, factor)
+        keep = reject_nb(dd, rule, factor)
         sk = si[keep]
         tk = ti[keep]
         if sk.shape[0] < min_corr:
@@ -362,7 +362,7 @@ def _icp_loop(
                             x[p] -= V[p, k] * coef / w[k]
                     else:
                         deficient = True
-            R = _euler_zyx(x[:3]) if euler else _rodrigues_nb(x[:3])
+            R = _euler_zyx(x[:3]) if euler else rodrigues_nb(x[:3])
             inc = np.eye(4)
             for a in range(3):
                 ta = c[a] + x[3 + a]
@@ -371,7 +371,7 @@ def _icp_loop(
                     ta -= R[a, b] * c[b]
                 inc[a, 3] = ta
         else:
-            inc = _kabsch_pairs(X, Y, sk, tk)
+            inc = kabsch_pairs(X, Y, sk, tk)
         T_old = T
         T = np.eye(4)
         for a in range(3):
@@ -380,7 +380,7 @@ def _icp_loop(
                     inc[a, 0] * T_old[0, b] + inc[a, 1] * T_old[1, b] + inc[a, 2] * T_old[2, b]
                 )
             T[a, 3] += inc[a, 3]
-        X, j, d = _kd_query(Pp, perm, sdim, sval, P, T, gate, False)
+        X, j, d = kd_query(Pp, perm, sdim, sval, P, T, gate, False)
         si, ti, dd = _valid_pairs(j, d, N, plane)
         n_iter = it
         if o3d:

@@ -76,8 +76,8 @@ from relnav.errors import ConfigError
 from relnav.geometry.icp_kernels import (
     _icp_loop,
     _plane_system,
-    _point_information,
     information_ratio,
+    point_information,
     reject_outliers,
 )
 from relnav.geometry.prepared_cloud import PreparedCloud, check_init, prepare_cloud
@@ -102,7 +102,7 @@ PAPER_ROTATION_TOL = 0.009
 Thresholds = Literal["scale", "paper"]
 
 
-def _failed(
+def failed_result(
     status: str, message: str, T: np.ndarray, timings: dict, info: dict
 ) -> RegistrationResult:
     """A non-``ok`` result at ``T`` (shared by the ICP family)."""
@@ -112,7 +112,7 @@ def _failed(
     )
 
 
-def _total(t: dict[str, float]) -> float:
+def total_time(t: dict[str, float]) -> float:
     return float(sum(t.values()))
 
 
@@ -131,7 +131,7 @@ def register_clouds(
     src = prepare_cloud(source, min_points=method.min_points, resolution=resolution, name="source")
     tgt = method.prepare(target, normals=target_normals, name="target")
     result = method.register_prepared(src, tgt, init=init)
-    result.timings["prepare"] = result.timings.get("prepare", 0.0) + _total(tgt.timings)
+    result.timings["prepare"] = result.timings.get("prepare", 0.0) + total_time(tgt.timings)
     return result
 
 
@@ -148,7 +148,7 @@ def start_pair(
     (``head``, the cloud sizes, ``tail``) and, when the guess or a cloud is unusable, the
     ``failed``/``degenerate`` result to return instead of registering.
     """
-    timings: dict[str, float] = {"prepare": _total(source.timings)}
+    timings: dict[str, float] = {"prepare": total_time(source.timings)}
     info: dict[str, Any] = {
         **head,
         "n_source": int(source.points.shape[0]),
@@ -159,11 +159,11 @@ def start_pair(
     }
     T0, msg = check_init(init)
     if T0 is None:
-        return np.eye(4), timings, info, _failed("failed", msg, np.eye(4), timings, info)
+        return np.eye(4), timings, info, failed_result("failed", msg, np.eye(4), timings, info)
     for cloud, nm in ((source, "source"), (target, "target")):
         if not cloud.ok:
             m = cloud.message if cloud.message.startswith(nm) else f"{nm}: {cloud.message}"
-            return T0, timings, info, _failed(cloud.status, m, T0, timings, info)
+            return T0, timings, info, failed_result(cloud.status, m, T0, timings, info)
     return T0, timings, info, None
 
 
@@ -406,7 +406,7 @@ class ICPSolver:
             gate=gate, translation_tol=ttol, rotation_tol=rtol, resolution=source.resolution
         )
         if not (gate > 0):
-            return _failed("degenerate", f"invalid gate {gate} m", T0, timings, info)
+            return failed_result("degenerate", f"invalid gate {gate} m", T0, timings, info)
         return self._iterate(source, target, T0, gate, ttol, rtol, timings, info)
 
     # ------------------------------------------------------------------ core loop
@@ -463,9 +463,9 @@ class ICPSolver:
                 f"iteration {it + 1}: {n_keep} correspondences within the gate "
                 f"({gate:.4g} m; need {min_corr}) — initial guess too far or gate too small"
             )
-            return _failed("failed", msg, T0, timings, info)
+            return failed_result("failed", msg, T0, timings, info)
         if code == 2:
-            return _failed(
+            return failed_result(
                 "degenerate", f"iteration {it + 1}: singular normal equations", T0, timings, info
             )
         # final statistics at the returned estimate
@@ -516,7 +516,7 @@ class ICPSolver:
             A = JTJ[np.ix_(perm, perm)]
             dof = m - 6
         else:
-            A, r2 = _point_information(X, target.points, si, ti)
+            A, r2 = point_information(X, target.points, si, ti)
             dof = 3 * m - 6
         ratio = information_ratio(A, X[si].mean(axis=0), radius)
         if not ratio > self.degeneracy_ratio or dof <= 0:

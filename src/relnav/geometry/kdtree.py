@@ -1,6 +1,6 @@
 """Static 3-D KD-tree compiled with numba: exact nearest neighbour within a distance bound.
 
-The flat arrays of :func:`_kd_build` are what the numba loops take (the ICP loop in
+The flat arrays of :func:`kd_build` are what the numba loops take (the ICP loop in
 :mod:`relnav.geometry.icp_kernels`, the navigator's voxel map and GICP); :class:`KDTree` wraps
 them for Python callers. ``benchmarks/speed/bench_kdtree.py`` compares it with scipy's ``cKDTree``
 and ``pykdtree`` on the ICP loop's query (transform + nearest neighbour within the gate): it is
@@ -22,8 +22,8 @@ __all__ = ["KDTree"]
 def _kd_build_impl(
     P: np.ndarray, leaf_size: int, select: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """The tree of :func:`_kd_build`; each node's points are ordered about its median by a sort
-    (``select=False``) or by a quickselect (``select=True``, :func:`_kd_build_select`)."""
+    """The tree of :func:`kd_build`; each node's points are ordered about its median by a sort
+    (``select=False``) or by a quickselect (``select=True``, :func:`kd_build_select`)."""
     n = P.shape[0]
     perm = np.arange(n)
     depth = 0
@@ -111,7 +111,7 @@ def _quickselect(
             break
 
 
-def _kd_build(
+def kd_build(
     P: np.ndarray, leaf_size: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Implicit balanced KD-tree: node ``k`` covers ``[s, e)`` of the permuted points, children
@@ -124,13 +124,13 @@ def _kd_build(
     return _kd_build_impl(P, leaf_size, False)
 
 
-def _kd_build_select(
+def kd_build_select(
     P: np.ndarray, leaf_size: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
+    """:func:`kd_build`'s tree (the same nodes, splits and arrays) in ``O(n log n)``: each node
     is split by a quickselect of its median instead of a sort.
 
-    A node holds the same points and gets the same split as with :func:`_kd_build` (when the
+    A node holds the same points and gets the same split as with :func:`kd_build` (when the
     split coordinates are distinct); only the order of the points inside a leaf differs, so a
     search returns the same neighbours, except that among points at exactly the same distance
     another may come first.
@@ -139,12 +139,12 @@ def _kd_build_select(
 
 
 @njit(cache=True, inline="always")
-def _children(
+def kd_children(
     node: int, s: int, e: int, diff: float
 ) -> tuple[int, int, int, int, int, int]:  # pragma: no cover - numba
     """The near and far child of ``node`` (covering ``[s, e)``) for a query ``diff`` from its
     split: ``(near_node, near_s, near_e, far_node, far_s, far_e)`` (the tree of
-    :func:`_kd_build`)."""
+    :func:`kd_build`)."""
     mid = (s + e) // 2
     if diff < 0.0:
         return 2 * node + 1, s, mid, 2 * node + 2, mid, e
@@ -152,7 +152,7 @@ def _children(
 
 
 @njit(cache=True)
-def _kd_query(
+def kd_query(
     Pp: np.ndarray,
     perm: np.ndarray,
     split_dim: np.ndarray,
@@ -206,7 +206,7 @@ def _kd_query(
                 continue
             qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
             diff = qv - split_val[node]
-            near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
+            near_n, near_s, near_e, far_n, far_s, far_e = kd_children(node, s, e, diff)
             st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
             top += 1
             st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
@@ -218,7 +218,7 @@ def _kd_query(
 
 
 @njit(cache=True)
-def _kd_knn(
+def kd_knn(
     Pp: np.ndarray,
     perm: np.ndarray,
     split_dim: np.ndarray,
@@ -234,11 +234,11 @@ def _kd_knn(
     numbers. A node is skipped when its cell is farther than the ``k``-th best so far (the
     cell's distance is kept per axis as the search descends).
     """
-    return _kd_knn_within(Pp, perm, split_dim, split_val, Q, k, np.full(Q.shape[0], np.inf))
+    return kd_knn_within(Pp, perm, split_dim, split_val, Q, k, np.full(Q.shape[0], np.inf))
 
 
 @njit(cache=True)
-def _kd_knn_within(
+def kd_knn_within(
     Pp: np.ndarray,
     perm: np.ndarray,
     split_dim: np.ndarray,
@@ -247,7 +247,7 @@ def _kd_knn_within(
     k: int,
     bound2: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """:func:`_kd_knn` among the points strictly closer to ``Q[i]`` than ``√bound2[i]``."""
+    """:func:`kd_knn` among the points strictly closer to ``Q[i]`` than ``√bound2[i]``."""
     n = Pp.shape[0]
     m = Q.shape[0]
     out_d = np.full((m, k), np.inf)
@@ -303,7 +303,7 @@ def _kd_knn_within(
             o0, o1, o2 = st_off[top, 0], st_off[top, 1], st_off[top, 2]
             old = o0 if dim == 0 else (o1 if dim == 1 else o2)
             far_lb = lb - old * old + diff * diff
-            near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
+            near_n, near_s, near_e, far_n, far_s, far_e = kd_children(node, s, e, diff)
             if far_lb < bound:
                 st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, far_lb
                 st_off[top, 0], st_off[top, 1], st_off[top, 2] = o0, o1, o2
@@ -322,8 +322,8 @@ class KDTree:
     """Static 3-D KD-tree in numba: exact nearest neighbour within an optional distance bound.
 
     About 3× faster per query than :class:`scipy.spatial.cKDTree` and 1.1–1.8× faster than
-    ``pykdtree`` for the single-NN queries of ICP (``benchmarks/speed/bench_kdtree.py``; its build is
-    slower, but one build serves every iteration), and :meth:`nn` transforms the queries on the
+    ``pykdtree`` for the single-NN queries of ICP (``benchmarks/speed/bench_kdtree.py``; its build
+    is slower, but one build serves every iteration), and :meth:`nn` transforms the queries on the
     fly (one pass per iteration).
     :meth:`query` mirrors ``cKDTree.query`` (``k > 1`` falls back to a cKDTree built lazily).
 
@@ -339,7 +339,7 @@ class KDTree:
         P = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         self.data = P
         self.n = int(P.shape[0])
-        self._Pp, self._perm, self._dim, self._val = _kd_build(P, int(leaf_size))
+        self._Pp, self._perm, self._dim, self._val = kd_build(P, int(leaf_size))
         self._ckd: Any = None
 
     def nn(
@@ -374,7 +374,7 @@ class KDTree:
         """
         Q = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
         TT = np.eye(4) if T is None else np.ascontiguousarray(T, dtype=np.float64)
-        return _kd_query(
+        return kd_query(
             self._Pp, self._perm, self._dim, self._val, Q, TT, float(max_distance), exclude_self
         )
 

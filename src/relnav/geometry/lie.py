@@ -13,13 +13,13 @@ import math
 import numpy as np
 from numba import njit
 
-from relnav.geometry.icp_kernels import _rodrigues_nb
+from relnav.geometry.icp_kernels import rodrigues_nb
 
 __all__ = ["exp_se3", "log_se3"]
 
 
 @njit(cache=True)
-def _rot_log(R: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def rot_log_nb(R: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """Rotation vector of ``R`` (``|w| ≤ π``).
 
     The angle is ``atan2(s, c)`` (accurate near 0 and π, unlike ``acos``); the axis comes from
@@ -64,7 +64,7 @@ def _hat2(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no 
 
 
 @njit(cache=True)
-def _exp(xi: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def exp_se3_nb(xi: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     phi = xi[3:].copy()
     K, K2, th = _hat2(phi)
     if th < 1e-8:
@@ -72,14 +72,14 @@ def _exp(xi: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     else:
         J = np.eye(3) + (1.0 - math.cos(th)) / th**2 * K + (th - math.sin(th)) / th**3 * K2
     T = np.eye(4)
-    T[:3, :3] = _rodrigues_nb(phi)
+    T[:3, :3] = rodrigues_nb(phi)
     T[:3, 3] = J @ xi[:3].copy()
     return T
 
 
 @njit(cache=True)
-def _log(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
-    phi = _rot_log(np.ascontiguousarray(T[:3, :3]))
+def log_se3_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    phi = rot_log_nb(np.ascontiguousarray(T[:3, :3]))
     K, K2, th = _hat2(phi)
     if th < 1e-8:
         Ji = np.eye(3) - 0.5 * K + K2 / 12.0
@@ -94,9 +94,9 @@ def _log(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
 
 def exp_se3(xi: np.ndarray) -> np.ndarray:
     """``4x4`` transform of the twist ``xi = [ρ (m), φ (rad)]`` (6,)."""
-    return _exp(np.ascontiguousarray(xi, dtype=np.float64).reshape(6))
+    return exp_se3_nb(np.ascontiguousarray(xi, dtype=np.float64).reshape(6))
 
 
 def log_se3(T: np.ndarray) -> np.ndarray:
     """Twist ``[ρ, φ]`` (6,) of a ``4x4`` rigid transform, ``|φ| ≤ π``."""
-    return _log(np.ascontiguousarray(T, dtype=np.float64))
+    return log_se3_nb(np.ascontiguousarray(T, dtype=np.float64))

@@ -19,16 +19,16 @@ from relnav.errors import ConfigError, InputError
 from relnav.geometry.local_mesh import local_mesh_triangles
 from relnav.geometry.neighbors import mean_resolution
 from relnav.geometry.radius_grid import _argsort_d2_idx as _argsort_d2_idx  # numba, old path
-from relnav.geometry.radius_grid import _check_points, _support_csr, radius_search
-from relnav.geometry.radius_grid import _grid_build as _grid_build
-from relnav.geometry.radius_grid import _grid_query as _grid_query
 from relnav.geometry.radius_grid import _group_csr as _group_csr
 from relnav.geometry.radius_grid import _radius_csr_kernel as _radius_csr_kernel
+from relnav.geometry.radius_grid import check_points, radius_search, support_csr
+from relnav.geometry.radius_grid import grid_build as grid_build
+from relnav.geometry.radius_grid import grid_query as grid_query
 from relnav.geometry.shot_lrf import SHOT_MIN_NEIGHBORS, shot_lrf
 from relnav.geometry.shot_lrf import _shot_lrf_full as _shot_lrf_full
 from relnav.geometry.shot_lrf import _shot_lrf_kernel as _shot_lrf_kernel
 from relnav.geometry.shot_lrf import _shot_lrf_kernel_csr as _shot_lrf_kernel_csr
-from relnav.geometry.shot_lrf import _shot_lrf_one as _shot_lrf_one
+from relnav.geometry.shot_lrf import shot_lrf_one as shot_lrf_one
 
 __all__ = ["SHOT_MIN_NEIGHBORS", "radius_search", "rops_local_mesh", "rops_lrf", "shot_lrf"]
 
@@ -311,7 +311,7 @@ def _local_mesh_support(
         max_edge = ROPS_MAX_EDGE_FACTOR * mean_resolution(P, tree)
     if not np.isfinite(max_edge):
         return None
-    flat, offsets = _support_csr(P, kp, radius + float(max_edge), tree)
+    flat, offsets = support_csr(P, kp, radius + float(max_edge), tree)
     return float(max_edge), flat, offsets
 
 
@@ -353,7 +353,7 @@ def rops_local_mesh(
         Vertex indices into ``points``; every triangle has a vertex within ``radius`` of its
         keypoint and no edge longer than ``max_edge``.
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     if not (np.isfinite(radius) and radius > 0):
         raise InputError(f"local-mesh radius must be positive and finite, got {radius}")
     check_rops_lrf("local_mesh", max_edge)
@@ -429,14 +429,14 @@ def rops_lrf(
     local surface description and object recognition", IJCV 105 (2013).
     doi:10.1007/s11263-013-0627-y
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     if not (np.isfinite(radius) and radius > 0):
         raise InputError(f"LRF radius must be positive and finite, got {radius}")
     if kp.size == 0:
         return np.full((0, 3, 3), np.nan)
     check_rops_lrf(lrf, max_edge)
-    flat, offsets = _support_csr(P, kp, float(radius), tree)
-    return _rops_lrf_csr(
+    flat, offsets = support_csr(P, kp, float(radius), tree)
+    return rops_lrf_csr(
         P, kp, flat, offsets, float(radius), triangles, float(degenerate_tol), lrf, max_edge, tree
     )
 
@@ -449,7 +449,7 @@ def check_rops_lrf(lrf: str, max_edge: float | None) -> None:
         raise ConfigError(f"RoPS max_edge must be positive and finite, got {max_edge}")
 
 
-def _rops_lrf_csr(
+def rops_lrf_csr(
     P: np.ndarray,
     kp: np.ndarray,
     flat: np.ndarray,
@@ -461,7 +461,7 @@ def _rops_lrf_csr(
     max_edge: float | None = None,
     tree: cKDTree | None = None,
 ) -> np.ndarray:
-    """:func:`rops_lrf` on precomputed support neighbourhoods (CSR from :func:`_support_csr`)."""
+    """:func:`rops_lrf` on precomputed support neighbourhoods (CSR from :func:`support_csr`)."""
     if triangles is None and lrf == "points":
         return _rops_lrf_points_kernel(P, kp, flat, offsets, radius, ROPS_MIN_SUPPORT, tol)
     if triangles is None:

@@ -18,7 +18,7 @@ __all__ = [
 
 
 @njit(cache=True)
-def _grid_build(pts: np.ndarray, cell: float):
+def grid_build(pts: np.ndarray, cell: float):
     """Uniform grid over ``pts`` with cell edge ``≥ cell`` (grown so there are ≤ 4N+64 cells).
 
     Returns ``(lo, h, dims, start, sidx, spts)``: the grid origin ``(3,)``, the cell edge, the
@@ -84,7 +84,7 @@ def _grid_build(pts: np.ndarray, cell: float):
 
 
 @njit(cache=True)
-def _grid_query(
+def grid_query(
     spts: np.ndarray,
     lo: np.ndarray,
     h: float,
@@ -98,7 +98,7 @@ def _grid_query(
 ) -> int:
     """Indices (and squared distances) of the points with ``‖x − q‖² ≤ r²``; returns the count.
 
-    ``spts``, ``lo`` ... ``sidx`` come from :func:`_grid_build`; ``out_idx`` / ``out_d2`` must
+    ``spts``, ``lo`` ... ``sidx`` come from :func:`grid_build`; ``out_idx`` / ``out_d2`` must
     hold ``N`` entries. Order is by grid cell (not sorted).
     """
     r2 = r * r
@@ -157,7 +157,7 @@ def _argsort_d2_idx(d2: np.ndarray, idx: np.ndarray) -> np.ndarray:
 def _radius_csr_kernel(pts: np.ndarray, queries: np.ndarray, r: float, sort: bool):
     n = pts.shape[0]
     nq = queries.shape[0]
-    lo, h, dims, start, sidx, spts = _grid_build(pts, r)
+    lo, h, dims, start, sidx, spts = grid_build(pts, r)
     offsets = np.zeros(nq + 1, dtype=np.int64)
     cap = max(16, nq * 16) + n
     idx = np.empty(cap, dtype=np.int64)
@@ -172,7 +172,7 @@ def _radius_csr_kernel(pts: np.ndarray, queries: np.ndarray, r: float, sort: boo
             d22[:tot] = d2[:tot]
             idx = idx2
             d2 = d22
-        m = _grid_query(spts, lo, h, dims, start, sidx, queries[k], r, idx[tot:], d2[tot:])
+        m = grid_query(spts, lo, h, dims, start, sidx, queries[k], r, idx[tot:], d2[tot:])
         if sort and m > 1:
             o = _argsort_d2_idx(d2[tot : tot + m], idx[tot : tot + m])
             idx[tot : tot + m] = idx[tot : tot + m][o]
@@ -219,7 +219,7 @@ def radius_search(
     return _radius_csr_kernel(P, Q, float(radius), bool(sort))
 
 
-def _support_csr(
+def support_csr(
     points: np.ndarray, keypoint_idx: np.ndarray, radius: float, tree: cKDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Radius neighbourhoods of the keypoints as CSR arrays ``(flat, offsets)``.
@@ -245,7 +245,7 @@ def _support_csr(
     return _group_csr(pairs["i"].astype(np.int64), pairs["j"].astype(np.int64), K)
 
 
-def _check_points(points: np.ndarray, keypoint_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def check_points(points: np.ndarray, keypoint_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     P = np.ascontiguousarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InputError(f"points must have shape (N, 3), got {P.shape}")

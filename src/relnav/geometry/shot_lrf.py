@@ -12,10 +12,10 @@ from scipy.spatial import cKDTree
 from relnav.errors import InputError
 from relnav.geometry.radius_grid import (
     _argsort_d2_idx,
-    _check_points,
-    _grid_build,
-    _grid_query,
-    _support_csr,
+    check_points,
+    grid_build,
+    grid_query,
+    support_csr,
 )
 
 __all__ = [
@@ -29,7 +29,7 @@ SHOT_MIN_NEIGHBORS = 5
 
 
 @njit(cache=True)
-def _shot_lrf_one(
+def shot_lrf_one(
     P: np.ndarray,
     p: np.ndarray,
     nbr: np.ndarray,
@@ -138,7 +138,7 @@ def _shot_lrf_kernel(P: np.ndarray, kp: np.ndarray, radius: float, min_nb: int):
     K = kp.shape[0]
     out = np.full((K, 3, 3), np.nan)
     ties = np.zeros((K, 2), dtype=np.bool_)
-    lo, h, dims, start, sidx, spts = _grid_build(P, radius)
+    lo, h, dims, start, sidx, spts = grid_build(P, radius)
     bi = np.empty(n, dtype=np.int64)
     bd = np.empty(n)
     V = np.empty((n, 3))
@@ -148,8 +148,8 @@ def _shot_lrf_kernel(P: np.ndarray, kp: np.ndarray, radius: float, min_nb: int):
     tie = np.zeros(2, dtype=np.bool_)
     for k in range(K):
         p = P[kp[k]]
-        m = _grid_query(spts, lo, h, dims, start, sidx, p, radius, bi, bd)
-        if _shot_lrf_one(P, p, bi, bd, m, radius, min_nb, V, vd2, vid, frame, tie):
+        m = grid_query(spts, lo, h, dims, start, sidx, p, radius, bi, bd)
+        if shot_lrf_one(P, p, bi, bd, m, radius, min_nb, V, vd2, vid, frame, tie):
             out[k] = frame
             ties[k, 0] = tie[0]
             ties[k, 1] = tie[1]
@@ -179,9 +179,7 @@ def _shot_lrf_kernel_csr(
     for k in range(K):
         s0 = offsets[k]
         m = offsets[k + 1] - s0
-        if _shot_lrf_one(
-            P, P[kp[k]], nbr[s0:], d2[s0:], m, radius, min_nb, V, vd2, vid, frame, tie
-        ):
+        if shot_lrf_one(P, P[kp[k]], nbr[s0:], d2[s0:], m, radius, min_nb, V, vd2, vid, frame, tie):
             out[k] = frame
             ties[k, 0] = tie[0]
             ties[k, 1] = tie[1]
@@ -194,7 +192,7 @@ def _shot_lrf_full(
     """:func:`shot_lrf` returning ``(lrf, ties)``; ``ties[k]`` flags median tie-breaks."""
     if tree is None:
         return _shot_lrf_kernel(P, kp, radius, SHOT_MIN_NEIGHBORS)
-    nbr, offsets = _support_csr(P, kp, radius, tree)
+    nbr, offsets = support_csr(P, kp, radius, tree)
     owner = np.repeat(np.arange(kp.size), np.diff(offsets))
     d2 = np.sum((P[nbr] - P[kp][owner]) ** 2, axis=1)
     return _shot_lrf_kernel_csr(P, kp, offsets, nbr, d2, radius, SHOT_MIN_NEIGHBORS)
@@ -236,7 +234,7 @@ def shot_lrf(
     S. Salti, F. Tombari, L. Di Stefano, "SHOT: Unique signatures of histograms for surface and
     texture description", CVIU 125 (2014). doi:10.1016/j.cviu.2014.04.011
     """
-    P, kp = _check_points(points, keypoint_idx)
+    P, kp = check_points(points, keypoint_idx)
     if not (np.isfinite(radius) and radius > 0):
         raise InputError(f"LRF radius must be positive and finite, got {radius}")
     if kp.size == 0:

@@ -34,6 +34,7 @@ __all__ = [
     "RansacGrouper",
     "available_groupers",
     "get_grouper",
+    "grouper_factory",
     "register_grouper",
 ]
 
@@ -76,6 +77,12 @@ def register_grouper(
 def available_groupers() -> dict[str, str]:
     """Registered grouper names with their one-line description."""
     return {k: v[1] for k, v in _REGISTRY.items()}
+
+
+def grouper_factory(name: str) -> Callable[..., Grouper] | None:
+    """The factory (class) registered as grouper ``name``, ``None`` if there is none."""
+    entry = _REGISTRY.get(name)
+    return None if entry is None else entry[0]
 
 
 def get_grouper(name: str, **options: Any) -> Grouper:

@@ -30,9 +30,9 @@ import numpy as np
 from numba import njit
 
 from relnav.geometry.eigen import solve_spd6
-from relnav.geometry.icp_kernels import _rodrigues_nb
-from relnav.geometry.kdtree import _children
-from relnav.geometry.lie import _rot_log
+from relnav.geometry.icp_kernels import rodrigues_nb
+from relnav.geometry.kdtree import kd_children
+from relnav.geometry.lie import rot_log_nb
 from relnav.geometry.se3 import adjoint
 
 if TYPE_CHECKING:
@@ -58,7 +58,7 @@ def _prior_twist(T: np.ndarray, Tp: np.ndarray) -> np.ndarray:  # pragma: no cov
     xi = np.empty(6)
     for a in range(3):
         xi[a] = T[a, 3] - (Rd[a, 0] * Tp[0, 3] + Rd[a, 1] * Tp[1, 3] + Rd[a, 2] * Tp[2, 3])
-    w = _rot_log(Rd)
+    w = rot_log_nb(Rd)
     xi[3], xi[4], xi[5] = w[0], w[1], w[2]
     return xi
 
@@ -251,7 +251,7 @@ def _two_nearest(
             continue
         qv = q0 if dim == 0 else (q1 if dim == 1 else q2)
         diff = qv - split_val[node]
-        near_n, near_s, near_e, far_n, far_s, far_e = _children(node, s, e, diff)
+        near_n, near_s, near_e, far_n, far_s, far_e = kd_children(node, s, e, diff)
         st_n[top], st_s[top], st_e[top], st_lb[top] = far_n, far_s, far_e, diff * diff
         top += 1
         st_n[top], st_s[top], st_e[top], st_lb[top] = near_n, near_s, near_e, 0.0
@@ -363,7 +363,7 @@ def _solve_loop(
                 s += Lam[p, q] * xi[q]
             b[p] = -s
         delta = solve_spd6(A, b)
-        R = _rodrigues_nb(delta[3:].copy())
+        R = rodrigues_nb(delta[3:].copy())
         Tn = np.eye(4)
         for a in range(3):
             for bb in range(3):

@@ -33,9 +33,9 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from relnav.errors import InputError
-from relnav.filtering.pose_filter import _canon_q, quat_delta
+from relnav.filtering.pose_filter import canon_q, quat_delta
 from relnav.filtering.ukf import euler_rates, torque_free_acceleration
-from relnav.geometry.dualquat import _qmul
+from relnav.geometry.dualquat import qmul
 
 __all__ = ["InertiaFit", "fit_inertia", "rate_sweep_deg", "refine_inertia"]
 
@@ -196,14 +196,14 @@ def _torque_free_attitudes(
     :class:`~relnav.fusion.ukf.TwistorUKF` does (Runge–Kutta steps of at most 1 s for the rate,
     the attitude by the mean of a step's first and last rates)."""
     J = _inertias(p, V0)
-    q = _qmul(np.broadcast_to(q0, (len(p), 4)), Rotation.from_rotvec(p[:, :3]).as_quat())
+    q = qmul(np.broadcast_to(q0, (len(p), 4)), Rotation.from_rotvec(p[:, :3]).as_quat())
     w = p[:, 3:6].copy()
     out = np.empty((len(p), len(t), 4))
     out[:, 0] = q
     for k in range(1, len(t)):
         dt = float(t[k] - t[k - 1])
         x = euler_rates(w, J, dt)
-        q = _canon_q(_qmul(q, quat_delta(0.5 * (w + x), dt)))
+        q = canon_q(qmul(q, quat_delta(0.5 * (w + x), dt)))
         w = x
         out[:, k] = q
     return out
@@ -268,7 +268,7 @@ def refine_inertia(
     conj = np.array([-1.0, -1.0, -1.0, 1.0])
 
     def misfit(qp: np.ndarray) -> np.ndarray:  # (m, 3 n_obs), rad
-        dq = _canon_q(_qmul(qp * conj, Q[ok][None]))
+        dq = canon_q(qmul(qp * conj, Q[ok][None]))
         return Rotation.from_quat(dq.reshape(-1, 4)).as_rotvec().reshape(len(qp), -1)
 
     def residuals(P: np.ndarray) -> np.ndarray:

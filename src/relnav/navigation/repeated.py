@@ -52,7 +52,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from relnav.geometry.kdtree import _kd_build_select, _kd_query
+from relnav.geometry.kdtree import kd_build_select, kd_query
 from relnav.navigation.gicp import ScanToMapFit
 from relnav.navigation.options import NavigatorConfig
 from relnav.navigation.voxel_map import VoxelMap, even_subset
@@ -114,10 +114,10 @@ class RepeatedPoints:
         if self._rays is not None and len(P):
             rng = float(np.median(np.linalg.norm(P, axis=1)))
             eps = 0.01 * spacing0 / max(rng, 1e-12)
-            _, j, _ = _kd_query(*self._rays, u, _EYE, eps, False)
+            _, j, _ = kd_query(*self._rays, u, _EYE, eps, False)
             self.ray_fraction = float(np.count_nonzero(j >= 0)) / len(P)
             self.same_rays = self.ray_fraction >= RAY_FRACTION
-        self._rays = _kd_build_select(np.ascontiguousarray(u), 16) if len(P) else None
+        self._rays = kd_build_select(np.ascontiguousarray(u), 16) if len(P) else None
         return self.same_rays
 
     def remember(self, P_full: np.ndarray, pose: np.ndarray) -> None:

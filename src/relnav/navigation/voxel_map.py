@@ -16,7 +16,7 @@ point's offset instead of from the plane (:func:`relnav.navigation.gicp.solve_sc
 last rebuild exceed a fraction of the map (``rebuild_fraction``); the recent points have a small
 tree of their own, rebuilt each frame, and a query takes the closer of the two answers. Only the
 points of the voxels an update touched get their information recomputed, their ``k`` neighbours
-found in the same two numba trees (:func:`relnav.geometry.kdtree._kd_knn`: the same neighbours and
+found in the same two numba trees (:func:`relnav.geometry.kdtree.kd_knn`: the same neighbours and
 distances as ``cKDTree``, without building a second pair of trees). The cost of a frame is
 therefore about linear in the scan size, not in the map size.
 
@@ -33,7 +33,7 @@ from numba import njit
 
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh
 from relnav.geometry.eigen import solve_spd6
-from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
+from relnav.geometry.kdtree import kd_build_select, kd_knn, kd_knn_within
 
 log = logging.getLogger(__name__)
 
@@ -141,7 +141,7 @@ def _map_knn(
     main tree's ``k``-th (a point there as far or farther would not be kept)."""
     mp, mperm, mdim, mval = main
     rp, rperm, rdim, rval, rids = recent
-    d_a, i_a = _kd_knn(mp, mperm, mdim, mval, Q, min(k, n_main))
+    d_a, i_a = kd_knn(mp, mperm, mdim, mval, Q, min(k, n_main))
     if n_recent > 0:
         bound2 = np.full(Q.shape[0], np.inf)
         if d_a.shape[1] == k:
@@ -149,7 +149,7 @@ def _map_knn(
                 if i_a[i, k - 1] >= 0:
                     # a hair above d²: the merge, not the bound, decides at a tie
                     bound2[i] = d_a[i, k - 1] * d_a[i, k - 1] * (1.0 + 1e-12)
-        d_b, i_b = _kd_knn_within(rp, rperm, rdim, rval, Q, min(k, n_recent), bound2)
+        d_b, i_b = kd_knn_within(rp, rperm, rdim, rval, Q, min(k, n_recent), bound2)
         for i in range(i_b.shape[0]):
             for j in range(i_b.shape[1]):
                 if i_b[i, j] >= 0:
@@ -590,11 +590,11 @@ class VoxelMap:
         n_recent = n - self._n_main
         if self._main_nb is None or self._n_main == 0 or n_recent > self.rebuild_fraction * n:
             self._n_main = n
-            self._main_nb = _kd_build_select(mu, 8)
+            self._main_nb = kd_build_select(mu, 8)
         start = self._n_main
         recent = np.ascontiguousarray(mu[start:]) if n > start else _FAR
         ids = np.arange(start, n, dtype=np.int64) if n > start else np.array([-1], np.int64)
-        self._recent_nb = (*_kd_build_select(recent, 8), ids)
+        self._recent_nb = (*kd_build_select(recent, 8), ids)
         touched = np.fromiter(self._touched, dtype=np.int64, count=len(self._touched))
         if len(touched):
             k = min(self.k_neighbors, n)

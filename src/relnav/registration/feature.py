@@ -407,18 +407,16 @@ def _make_feature(spec: str | None, **options: Any) -> FeatureRegistration:
 
 def _check_nested_options(d: str, g: str, e: str, options: dict[str, Any]) -> None:
     """Check ``descriptor_/grouper_/estimator_options`` before anything runs (ConfigError)."""
-    from relnav.config import check_options
-    from relnav.estimation.base import _REGISTRY as ESTIMATORS
-    from relnav.estimation.base import _load_all as load_estimators
-    from relnav.matching.grouping import _REGISTRY as GROUPERS
-
-    load_estimators()
     import inspect
 
+    from relnav.config import check_options
+    from relnav.estimation.base import estimator_factory
+    from relnav.matching.grouping import grouper_factory
+
     own = set(inspect.signature(FeatureRegistration.__init__).parameters) - {"self"}
-    for key, name, registry in (
-        ("estimator_options", e, ESTIMATORS),
-        ("grouper_options", g, GROUPERS),
+    for key, name, factory_of in (
+        ("estimator_options", e, estimator_factory),
+        ("grouper_options", g, grouper_factory),
         ("descriptor_options", d, None),
     ):
         sub = options.get(key)
@@ -432,5 +430,6 @@ def _check_nested_options(d: str, g: str, e: str, options: dict[str, Any]) -> No
                 f"feature: {key}.{misplaced[0]} is an option of the feature method itself "
                 f"(use -O {misplaced[0]}=...)"
             )
-        if registry is not None and name in registry:
-            check_options(registry[name][0], sub, where=f"feature {key} ({name})")
+        factory = factory_of(name) if factory_of is not None else None
+        if factory is not None:
+            check_options(factory, sub, where=f"feature {key} ({name})")

@@ -24,24 +24,24 @@ from __future__ import annotations
 # the former names, re-exported (navigation/, super4pcs, the adapters and the tests use them)
 from relnav.geometry.eigen import jacobi_eigh as _jacobi_eigh  # noqa: F401
 from relnav.geometry.icp_kernels import (  # noqa: F401
-    _horn_rotation,
-    _kabsch_pairs,
-    _point_information,
-    _reject_nb,
-    _rodrigues_nb,
-    _transform,
+    horn_rotation,
     information_ratio,
+    kabsch_pairs,
+    point_information,
+    reject_nb,
     reject_outliers,
+    rodrigues_nb,
+    transform_nb,
 )
 from relnav.geometry.icp_solver import (  # noqa: F401
     PAPER_GATE,
     PAPER_ROTATION_TOL,
     PAPER_TRANSLATION_TOL,
     ICPSolver,
-    _failed,
-    _total,
+    failed_result,
+    total_time,
 )
-from relnav.geometry.kdtree import KDTree, _kd_build, _kd_query  # noqa: F401
+from relnav.geometry.kdtree import KDTree, kd_build, kd_query  # noqa: F401
 from relnav.geometry.prepared_cloud import PreparedCloud, check_init, prepare_cloud
 from relnav.registration.base import register_variants
 

@@ -52,7 +52,7 @@ from numba import njit
 
 from relnav.errors import ConfigError
 from relnav.geometry.eigen import jacobi_eigh
-from relnav.geometry.icp_kernels import _horn_rotation, _rodrigues_nb, _transform
+from relnav.geometry.icp_kernels import horn_rotation, rodrigues_nb, transform_nb
 from relnav.geometry.icp_solver import (
     PAPER_GATE,
     register_clouds,
@@ -61,7 +61,7 @@ from relnav.geometry.icp_solver import (
 )
 from relnav.geometry.prepared_cloud import PreparedCloud, prepare_cloud
 from relnav.registration.base import register_variants
-from relnav.registration.icp import ICP, _failed
+from relnav.registration.icp import ICP, failed_result
 from relnav.registration.result import RegistrationResult
 
 __all__ = ["SparseICP", "shrink"]
@@ -144,7 +144,7 @@ def _kabsch(X: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             xa = X[i, a] - mx[a]
             for b in range(3):
                 H[a, b] += xa * (U[i, b] - mu_[b])
-    R = _horn_rotation(H)
+    R = horn_rotation(H)
     t = np.empty(3)
     for a in range(3):
         t[a] = mu_[a] - (R[a, 0] * mx[0] + R[a, 1] * mx[1] + R[a, 2] * mx[2])
@@ -205,7 +205,7 @@ def _plane_fit(
                 x[p] += V[p, k] * coef / w[k]
         else:
             ok = False
-    R = _rodrigues_nb(x[:3])
+    R = rodrigues_nb(x[:3])
     t = np.empty(3)
     for a in range(3):
         t[a] = c[a] + x[3 + a] - (R[a, 0] * c[0] + R[a, 1] * c[1] + R[a, 2] * c[2])
@@ -534,7 +534,7 @@ class SparseICP:
 
         Y = target.points
         Nn = target.normals
-        X = _transform(source.points, T0)  # current transformed source, metres
+        X = transform_nb(source.points, T0)  # current transformed source, metres
         Xs = X / L
         n = X.shape[0]
         C = np.zeros((n, 3)) if self.variant == "point" else np.zeros(n)
@@ -603,7 +603,7 @@ class SparseICP:
             Tm = Tinc.copy()
             Tm[:3, 3] *= L
             T = Tm @ T
-            Xs = _transform(source.points, T) / L
+            Xs = transform_nb(source.points, T) / L
             t_solve += time.perf_counter() - tc
             step = float(np.sqrt(((Xs - Xo2) ** 2).sum(axis=1)).max())
             Xo2 = Xs.copy()
@@ -616,7 +616,7 @@ class SparseICP:
         timings["solve"] = t_solve
         if status != "ok":
             info["T_estimate"] = T
-            return _failed(status, message, T0, timings, info)
+            return failed_result(status, message, T0, timings, info)
         tc = time.perf_counter()
         X, j, d = target.tree.nn(source.points, gate, T=T)
         used = j >= 0

@@ -64,9 +64,9 @@ from relnav.registration.base import register_method
 from relnav.registration.icp import (
     PAPER_GATE,
     PreparedCloud,
-    _failed,
-    _total,
+    failed_result,
     prepare_cloud,
+    total_time,
 )
 from relnav.registration.result import RegistrationResult
 
@@ -294,7 +294,7 @@ class Super4PCS:
         src = self.prepare(source, name="source")
         tgt = self.prepare(target, name="target")
         result = self.register_prepared(src, tgt, init=init)
-        result.timings["prepare"] = result.timings.get("prepare", 0.0) + _total(tgt.timings)
+        result.timings["prepare"] = result.timings.get("prepare", 0.0) + total_time(tgt.timings)
         return result
 
     def register_prepared(
@@ -372,7 +372,7 @@ class Super4PCS:
         lcp = best_count / m
         info.update(n_bases=n_bases, n_candidates=n_cand_total, lcp=lcp)
         if best_R is None:
-            return _failed(
+            return failed_result(
                 "failed",
                 f"no congruent 4-point set found in {n_bases} bases (δ = {delta:.4g} m)",
                 T0,

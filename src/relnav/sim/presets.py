@@ -35,8 +35,8 @@ and merged (:mod:`relnav.sim.model_cloud`, procedural targets instead of NASA CA
 HPR per pose, so consecutive scans share points; ``"resample"`` draws fresh uniform surface
 samples every frame (harsher: nothing repeats between scans). Both add 1 cm range noise per
 frame (``HPR_RANGE_SIGMA_M``; seeds therefore change the data). Each mode has its own
-``n_points`` tuned to the paper's counts (``benchmarks/paper1/paper1_cardinality.py``, mean pts/scan,
-fixed / resample): sim-eoi 3097 / 3073, sim-helical 437 / 430, sim-voyager 185 / 186,
+``n_points`` tuned to the paper's counts (``benchmarks/paper1/paper1_cardinality.py``, mean
+pts/scan, fixed / resample): sim-eoi 3097 / 3073, sim-helical 437 / 430, sim-voyager 185 / 186,
 sim-orion 293 / 285, sim-bennu 147 / 153. First 60 frames of sim-voyager, seed 0, T_error
 fixed / resample: icp-point 0.17 / 1.48 %, feature:shot+gcc+svd 1.33 / 42.2 % (before this
 data generation, i.e. resampled and noiseless: 1.51 / 44.6 %).

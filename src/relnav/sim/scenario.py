@@ -324,7 +324,7 @@ def default_scenario() -> Scenario:
     )
 
 
-def _parse_value(text: str) -> Any:
+def parse_value(text: str) -> Any:
     """A command-line value parsed as YAML, and a number YAML 1.1 leaves as a string (``1e1``,
     ``1E-3``, ``1_000``) parsed as that number; unparsable text stays the text."""
     try:
@@ -359,7 +359,7 @@ def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str
 
     out = copy.deepcopy(data)
     for key, raw in overrides.items():
-        value = _parse_value(raw) if isinstance(raw, str) else raw
+        value = parse_value(raw) if isinstance(raw, str) else raw
         parts = str(key).split(".")
         node: Any = out
         for i, part in enumerate(parts):
@@ -847,7 +847,7 @@ def simulate(
         if empty == n_sim:
             raise InputError(
                 f"sensor {spec.label} saw nothing of the target in any of the {n_sim} "
-                "frames: check range/FOV/trajectory"
+                f"frames: check range (max_range {sensors[i].max_range:g} m)/FOV/trajectory"
             )
         if empty:
             log.warning(

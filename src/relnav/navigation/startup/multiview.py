@@ -67,8 +67,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from relnav.geometry.kdtree import _kd_build_select, _kd_knn, _kd_knn_within
-from relnav.geometry.lie import _exp, _log, exp_se3, log_se3
+from relnav.geometry.kdtree import kd_build_select, kd_knn, kd_knn_within
+from relnav.geometry.lie import exp_se3, exp_se3_nb, log_se3, log_se3_nb
 from relnav.geometry.rotations import rotation_angle
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import left_information, solve_scan_to_map
@@ -270,8 +270,8 @@ def _window_pairs(
     n = len(used)
     Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
     lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
-    tree = _kd_build_select(Y, 16)
-    dn, nb = _kd_knn(*tree, Y, min(c.k_neighbors, len(Y)))
+    tree = kd_build_select(Y, 16)
+    dn, nb = kd_knn(*tree, Y, min(c.k_neighbors, len(Y)))
     Om, _ = plane_information(Y, nb, c.init_inplane_sigma * s0, c.noise_floor * s0)
     # the pair: the nearest point of another frame among the ``kq`` nearest within the gate,
     # found among the plane neighbours first, the few points they do not settle queried again
@@ -281,7 +281,7 @@ def _window_pairs(
     b = np.where(other.any(axis=1), nb[np.arange(len(Y)), np.argmax(other, axis=1)], -1)
     more = np.nonzero((b < 0) & (dn[:, -1] < gate) & (kq > nb.shape[1]))[0]
     if len(more):
-        _, idx = _kd_knn_within(*tree, Y[more], kq, np.full(len(more), gate**2))
+        _, idx = kd_knn_within(*tree, Y[more], kq, np.full(len(more), gate**2))
         other = (idx >= 0) & (lab[idx] != lab[more, None])
         b[more] = np.where(
             other.any(axis=1), idx[np.arange(len(more)), np.argmax(other, axis=1)], -1
@@ -397,8 +397,8 @@ def _step_error(Ts: np.ndarray, vdt: np.ndarray) -> np.ndarray:  # pragma: no co
         Ti[:3, :3] = Ri
         Ti[:3, 3] = -(Ri @ Ts[m, :3, 3].copy())
         D[m] = Ti @ Ts[m + 1]
-    e = _log(D[0])
-    return e - (_log(D[1]) if len(Ts) == 3 else vdt)
+    e = log_se3_nb(D[0])
+    return e - (log_se3_nb(D[1]) if len(Ts) == 3 else vdt)
 
 
 @njit(cache=True)
@@ -415,8 +415,8 @@ def _step_jacobian(
             dq = np.zeros(6)
             dq[q] = eps
             Tp, Tm = Ts.copy(), Ts.copy()
-            Tp[m] = _exp(dq) @ Ts[m]
-            Tm[m] = _exp(-dq) @ Ts[m]
+            Tp[m] = exp_se3_nb(dq) @ Ts[m]
+            Tm[m] = exp_se3_nb(-dq) @ Ts[m]
             J[:, 6 * m + q] = (_step_error(Tp, vdt) - _step_error(Tm, vdt)) / (2 * eps)
     return e, J
 
