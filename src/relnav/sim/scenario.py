@@ -711,7 +711,8 @@ def _check_target_visible(
         else:
             raise InputError(
                 f"sensor {spec.label} saw nothing of the target in any of the {len(T)} frames "
-                "(out of range or field of view): check range/FOV/trajectory (nothing written)"
+                f"(out of range, max_range {sensor.max_range:g} m, or field of view): check "
+                "range/FOV/trajectory (nothing written)"
             )
 
 
@@ -823,7 +824,11 @@ def simulate(
             if progress is not None:
                 progress(k + 1, n_sim)
         if not seen.all():
-            blind = [spec.label for spec, v in zip(sc.sensors, seen, strict=True) if not v]
+            blind = [
+                f"{spec.label} (max_range {s.max_range:g} m)"
+                for spec, s, v in zip(sc.sensors, sensors, seen, strict=True)
+                if not v
+            ]
             raise InputError(
                 f"sensor {', '.join(blind)} saw nothing of the target in any of the {n_sim} "
                 "frames: check range/FOV/trajectory (nothing written)"
@@ -847,7 +852,7 @@ def simulate(
         if empty == n_sim:
             raise InputError(
                 f"sensor {spec.label} saw nothing of the target in any of the {n_sim} "
-                f"frames: check range (max_range {sensors[i].max_range:g} m)/FOV/trajectory"
+                "frames: check range/FOV/trajectory"
             )
         if empty:
             log.warning(

@@ -13,7 +13,7 @@ from relnav.sim.sensors.base import (
 from relnav.sim.sensors.depth_camera import DepthCamera
 from relnav.sim.sensors.flash import FlashLidar
 from relnav.sim.sensors.rotating import ScanningLidar
-from relnav.sim.sensors.surface import SurfaceSampler
+from relnav.sim.sensors.surface import HPR_MAX_RANGE_M, SurfaceSampler
 
 # --------------------------------------------------------------------------- presets
 
@@ -91,7 +91,11 @@ _PRESETS: dict[str, tuple[type[Sensor], dict[str, Any]]] = {
         ),
     ),
     "kinect1": (DepthCamera, {}),
-    "surface-hpr": (SurfaceSampler, dict(n_points=500, hpr_radius_factor=100.0)),
+    # max_range: HPR_MAX_RANGE_M (3 km), the class default, written out for `relnav config`
+    "surface-hpr": (
+        SurfaceSampler,
+        dict(n_points=500, hpr_radius_factor=100.0, max_range=HPR_MAX_RANGE_M),
+    ),
 }
 
 _KINDS: dict[str, type[Sensor]] = {

@@ -31,6 +31,11 @@ from relnav.sim.targets import Target
 
 log = logging.getLogger(__name__)
 
+HPR_MAX_RANGE_M = 3000.0
+"""Default maximum range of :class:`SurfaceSampler` (and so of paper 1's five HPR presets), m:
+a space flash LIDAR of the GoldenEye class (the ``goldeneye`` preset's 3 km)
+**[interpretation]**. The presets fly at 12-75 m, so their scans do not change."""
+
 
 class SurfaceSampler(Sensor):
     """Paper 1's simulated clouds: points of the target's surface + hidden point removal.
@@ -57,7 +62,10 @@ class SurfaceSampler(Sensor):
         HPR flipping radius over the farthest point distance, ``10**γ`` (default 100,
         ``γ = 2`` **[interpretation]**). Smaller → sparser, more aggressive removal.
     min_range, max_range : float
-        Range crop, metres (``max_range`` may be ``inf``).
+        Range crop of the slant range, metres (``0 <= min_range < max_range``). Default
+        ``max_range``: :data:`HPR_MAX_RANGE_M` (3 km, a flash LIDAR of the GoldenEye class
+        **[interpretation]**: paper 1 gives none); ``inf`` removes the limit. Beyond it the
+        scan is empty, like a target out of sight.
     fov_h_deg, fov_v_deg : float, optional
         Rectangular pinhole field of view centred on +x, degrees (None: no crop).
     noise_sigma : float
@@ -99,7 +107,7 @@ class SurfaceSampler(Sensor):
         n_surface: int | None = None,
         hpr_radius_factor: float = 100.0,
         min_range: float = 0.0,
-        max_range: float = math.inf,
+        max_range: float = HPR_MAX_RANGE_M,
         fov_h_deg: float | None = None,
         fov_v_deg: float | None = None,
         noise_sigma: float = 0.0,
@@ -323,6 +331,10 @@ class SurfaceSampler(Sensor):
     ) -> SensorReturn:
         T = _check_pose(T_target_sensor)
         gen = as_generator(rng)
+        c_t, rho = target.bounding_sphere
+        dist = float(np.linalg.norm(c_t - T[:3, 3]))
+        if dist - rho > self.max_range_m or dist + rho < self.min_range:
+            return SensorReturn.empty()  # no point can be in range: nothing drawn (as rays)
         if self.model_cloud == "fixed":
             mc = self.model_cloud_of(target)
             pts_t, faces = mc.points, mc.faces
