@@ -767,14 +767,14 @@ def _solve_pose_graph(
     tolerance: float = 1e-9,
 ) -> tuple[list[np.ndarray], int]:
     """Gauss–Newton on the frames' SE(3) pose graph, node 0 fixed
-    (:class:`relnav.geometry.pose_graph.PoseGraph`, no robust edges).
+    (:class:`relnav.geometry.pose_graph_solver.PoseGraph`, no robust edges).
 
     ``edges``: ``(i, j) -> (Z, Ω)`` with ``Z ≈ X_i⁻¹ X_j`` and the information ``Ω`` (6, 6) of a
     right perturbation, twists ``[ρ (m), φ (rad)]``; ``priors``: ``j -> (T, Ω)`` with ``T ≈ X_j``.
     Returns the optimised poses (node 0 unchanged) and the iterations run; stops when the largest
     update component is below ``tolerance`` (m and rad).
     """
-    from relnav.geometry.pose_graph import PoseGraph
+    from relnav.geometry.pose_graph_solver import PoseGraph
 
     g = PoseGraph()
     for T in poses:

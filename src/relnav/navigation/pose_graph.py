@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from relnav.geometry.lie import exp_se3, log_se3
-from relnav.geometry.pose_graph import PoseGraph, PoseGraphResult
+from relnav.geometry.pose_graph_solver import PoseGraph, PoseGraphResult
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import degeneracy, solve_scan_to_map, variance_factor
 from relnav.navigation.voxel_map import VoxelMap
