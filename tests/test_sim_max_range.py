@@ -89,3 +89,12 @@ def test_scenario_out_of_range_is_one_error_line(tmp_path) -> None:  # type: ign
     assert r.exit_code == 1
     msg = str(r.exception)
     assert "saw nothing of the target" in msg and "max_range 3000 m" in msg
+
+
+def test_config_list_names_each_presets_sensor_range() -> None:
+    r = CliRunner().invoke(app, ["config", "list"], env={"COLUMNS": "240"})
+    assert r.exit_code == 0, r.output
+    rows = {line.split("│")[1].strip(): line for line in r.output.splitlines() if "│" in line}
+    assert "surface-hpr, 3000 m range" in rows["sim-voyager"]
+    assert "vlp16, 100 m range" in rows["real-fb"]
+    assert "kinect1, 6 m depth" in rows["li-rotating"] and "hdl64, 120 m" in rows["li-rotating"]

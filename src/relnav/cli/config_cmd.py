@@ -62,20 +62,37 @@ def dump(
 
 @config_app.command("list")
 def list_presets() -> None:
-    """List the scenario presets with their options and descriptions."""
+    """List the scenario presets with their options, sensors (maximum range) and descriptions."""
     from rich.table import Table
 
     from relnav.sim.presets import available_presets, get_preset, preset_options
+    from relnav.sim.sensors import make_sensor
 
     table = Table(title="scenario presets (relnav simulate NAME --out DIR)")
     table.add_column("preset")
     table.add_column("frames", justify="right")
     table.add_column("options")
+    table.add_column("sensor: preset, max range")
     table.add_column("description")
     for name in available_presets():
         sc = get_preset(name)
-        table.add_row(name, str(sc.frames), ", ".join(preset_options(name)), sc.description)
+        sensors = []
+        for s in sc.sensors:
+            d = make_sensor(s.preset, **{k: v for k, v in s.overrides.items() if k != "name"})
+            what = "depth" if d.kind == "depth_camera" else "range"
+            sensors.append(f"{s.label}: {s.preset}, {d.to_dict()['max_range']:g} m {what}")
+        table.add_row(
+            name,
+            str(sc.frames),
+            ", ".join(preset_options(name)),
+            "; ".join(sensors),
+            sc.description,
+        )
     console.print(table)
+    console.print(
+        "max range: beyond it a sensor returns nothing (slant range; depth along the boresight "
+        "for the Kinect); change it with --param sensors.0.overrides.max_range=M"
+    )
 
 
 def register(app: typer.Typer) -> None:
