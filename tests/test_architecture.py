@@ -26,6 +26,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("odometry",),
     ("navigation",),
     ("eval",),
+    ("pipeline",),
     ("bench",),
     ("cli",),
 ]

@@ -130,7 +130,7 @@ def test_demo_worker_death_is_an_error_not_a_hang(tmp_path):
 
     from relnav.cli.demo import _Workers
     from relnav.errors import RelnavError
-    from relnav.odometry.presets import resolve_method
+    from relnav.pipeline import resolve_method
     from relnav.sim.presets import get_preset
     from relnav.sim.scenario import simulate
 

@@ -11,7 +11,8 @@ from typer.testing import CliRunner
 
 from relnav.cli.main import app, main
 from relnav.errors import ConfigError, RelnavError
-from relnav.odometry.presets import METHOD_PRESETS, resolve_method
+from relnav.odometry.presets import METHOD_PRESETS
+from relnav.pipeline import resolve_method
 
 runner = CliRunner()
 

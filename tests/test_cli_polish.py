@@ -246,7 +246,7 @@ def test_error_envelope_and_figures_like_evo(tmp_path):
 def test_state_figures_title_says_which_command_made_them():
     from types import SimpleNamespace
 
-    from relnav.cli.track import state_title
+    from relnav.eval.track_plots import state_title
 
     nav = SimpleNamespace(filter="ukf", meta={"method": "relnav"})
     assert state_title(nav).startswith("relnav odometry — relnav: relative state")

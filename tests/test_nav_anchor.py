@@ -20,8 +20,7 @@ from relnav.navigation import Navigator
 from relnav.navigation import rigid_body as rigid_body_module
 from relnav.navigation import state as state_module
 from relnav.navigation.state import StateRecord, relative_state
-from relnav.odometry import run_sequence
-from relnav.odometry.presets import resolve_method
+from relnav.pipeline import resolve_method, run_sequence
 from relnav.sim.scenario import simulate
 
 FRAMES = 30

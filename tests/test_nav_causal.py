@@ -10,7 +10,7 @@ from nav_scenarios import flash_orbit
 from relnav.errors import InputError, RelnavError
 from relnav.io.sequences import ScanSequence
 from relnav.io.trajectories import read_tum
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.scenario import Scenario, scenario_poses, simulate
 from relnav.sim.trajectories import pointing_poses
 

@@ -10,7 +10,7 @@ from nav_scenarios import attitude_errors_deg, flash_orbit
 from relnav.errors import ConfigError
 from relnav.geometry.se3 import invert
 from relnav.navigation import Navigator
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.scenario import simulate
 
 FRAMES = 16

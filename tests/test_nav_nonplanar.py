@@ -14,7 +14,7 @@ from relnav.geometry.se3 import log_se3
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.gicp import left_information, solve_scan_to_map
 from relnav.navigation.voxel_map import plane_information
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.scenario import simulate
 
 

@@ -172,7 +172,7 @@ def test_bad_orbit_options_are_one_config_error(bad) -> None:
 def test_navigator_records_its_verdict():
     """With the orbit given, ``finalize`` runs the test and the run records its verdict
     (``run.json``'s options); the poses have one per frame whatever it says."""
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
     from relnav.scan import Scan
 
     rng = np.random.default_rng(6)

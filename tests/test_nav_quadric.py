@@ -15,7 +15,7 @@ from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.gicp import _accumulate, left_information, solve_scan_to_map
 from relnav.navigation.voxel_map import quadric_surface
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.scenario import simulate
 
 

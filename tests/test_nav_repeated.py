@@ -9,7 +9,7 @@ import pytest
 from nav_scenarios import flash_orbit
 from relnav.geometry.se3 import invert
 from relnav.io.sequences import ScanSequence
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.presets import get_preset
 from relnav.sim.scenario import simulate
 

@@ -11,7 +11,7 @@ from nav_scenarios import FLASH_64, flash_orbit
 from relnav.geometry.se3 import adjoint, exp_se3, invert, log_se3
 from relnav.navigation import Navigator, VoxelMap
 from relnav.navigation.motion import ConstantVelocityFilter
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.scenario import simulate
 
 

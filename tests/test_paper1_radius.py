@@ -7,7 +7,8 @@ import pytest
 
 import relnav.matching.nn as nn_module
 from relnav.odometry import Odometry
-from relnav.odometry.presets import METHOD_PRESETS, resolve_method
+from relnav.odometry.presets import METHOD_PRESETS
+from relnav.pipeline import resolve_method
 
 
 def _scans() -> tuple[np.ndarray, np.ndarray, int]:

@@ -24,7 +24,8 @@ from relnav.geometry import invert, transform_points
 from relnav.geometry.se3 import exp_se3, kabsch
 from relnav.io.locks import FolderLock
 from relnav.io.sequences import ScanSequence, write_sequence
-from relnav.odometry import Odometry, run_sequence
+from relnav.odometry import Odometry
+from relnav.pipeline import run_sequence
 from relnav.registration import RegistrationResult
 
 runner = CliRunner()

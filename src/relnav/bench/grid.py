@@ -502,7 +502,7 @@ def expand_jobs(grid: GridSpec) -> list[Job]:
     For ``sequence`` scenarios the clean level runs once (the first seed) since the data do not
     depend on the seed; nuisance levels run for every seed.
     """
-    from relnav.odometry.presets import resolve_method
+    from relnav.pipeline import resolve_method
 
     resolved: dict[int, tuple[str, dict[str, Any]]] = {}
     for i, m in enumerate(grid.methods):

@@ -314,7 +314,7 @@ def warm_up(seq_dir: Path, methods: list[str], relnav_options: dict[str, str]) -
     multi-view window), so that one-off costs (numba's compiled-code cache, a library's first
     import) are not charged to the first sequence's whole-run time."""
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(seq_dir)
     for method in methods:
@@ -344,7 +344,7 @@ def run_method(
     under ``"smoothed"``; ``per_step`` adds the steps' arrays under ``"steps"``."""
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(seq_dir)
     if method == "relnav":

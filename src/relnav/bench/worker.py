@@ -183,7 +183,7 @@ def run_job(job: dict[str, Any], out_root: str, sequence_dir: str | None = None)
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.io.trajectories import read_tum
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import OdometryPipeline
 
     started = _now()
     t0 = time.perf_counter()
@@ -196,9 +196,11 @@ def run_job(job: dict[str, Any], out_root: str, sequence_dir: str | None = None)
         seq = ScanSequence(sequence_dir, sensor=spec.get("sensor"))
         max_frames = spec.get("max_frames") if job["scenario_kind"] == "sequence" else None
         warm = int(job.get("warmup_frames", 0))
+        # the grid resolved the method (a preset expanded) and checked its options
+        pipe = OdometryPipeline(job["method"], job["options"], validate=False)
         if warm >= 2 and len(seq) >= 2:
-            run_sequence(seq, job["method"], max_frames=warm, **job["options"])
-        run = run_sequence(seq, job["method"], max_frames=max_frames, **job["options"])
+            pipe.run(seq, max_frames=warm, stream=False)
+        run = pipe.run(seq, max_frames=max_frames, stream=False).run
         out = Path(out_root) / "runs" / job["job_id"]
         paths = run.write(out)
         diag = run.diagnostics()

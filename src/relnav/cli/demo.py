@@ -92,16 +92,19 @@ def _run_method(
     seed: int,
     progress: Callable[[], None] | None = None,
 ) -> tuple[dict[str, Any], _Trajectory]:
-    """Run one method on the simulated sequence and write its run folder; returns its metrics
-    and trajectory. Called in the CLI process or in a worker (:func:`_run_side_by_side`)."""
-    from relnav.cli.odometry import write_run_outputs
+    """Run one method on the simulated sequence and write its run folder
+    (:class:`relnav.pipeline.OdometryPipeline`); returns its metrics and trajectory. Called in
+    the CLI process or in a worker (:func:`_run_side_by_side`)."""
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import OdometryPipeline
 
     seq = ScanSequence(seq_dir)
     tick = (lambda i, s: progress()) if progress is not None else None
-    run = run_sequence(seq, name, progress=tick, **options)
-    metrics = write_run_outputs(folder, run, seq, command="demo", preset=preset, seed=seed)
+    pipe = OdometryPipeline(name, options, validate=False)  # resolved and checked already
+    pipe.preset = preset  # the name it was expanded from (labels, run.json)
+    result = pipe.run(seq, progress=tick, stream=False)
+    run = result.run
+    metrics = pipe.write(result, seq, folder, command="demo", seed=seed)
     if run.causal_poses is not None and "causal" in metrics:  # like the causal peers
         smoothed = {k: metrics[k] for k in metrics["causal"] if k in metrics}
         metrics = {**metrics, **metrics.pop("causal"), "smoothed": smoothed}
@@ -120,8 +123,7 @@ def _worker_init(queue: Any) -> None:
     global _QUEUE
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _QUEUE = queue
-    import relnav.cli.odometry
-    import relnav.odometry  # noqa: F401
+    import relnav.pipeline  # noqa: F401
 
 
 def _worker_run(*job: Any) -> tuple[dict[str, Any], _Trajectory]:
@@ -266,7 +268,7 @@ def demo(
     from relnav.eval.plots import plot_errors, plot_trajectories
     from relnav.io.runinfo import run_info, write_run_info
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry.presets import resolve_method
+    from relnav.pipeline import resolve_method
     from relnav.sim.presets import get_preset
 
     method = list(method) if method else default_methods()

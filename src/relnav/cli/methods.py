@@ -35,18 +35,14 @@ def methods() -> None:
     from relnav.features import available_descriptors
     from relnav.matching.grouping import available_groupers
     from relnav.odometry.presets import METHOD_PRESETS
+    from relnav.pipeline import available_trackers  # also registers paper 2's methods
     from relnav.registration import available_methods
 
     t = Table(title="registration methods (use with `relnav odometry --method`)")
     for col in ("method", "description", "available"):
         t.add_column(col)
-    t.add_row(
-        "relnav",
-        "relnav's own navigator (the default): frame-to-model robust GICP on a voxel map of the "
-        "target, constant-velocity filter of pose and velocity as the prior, flags from "
-        "overlap, degeneracy and motion consistency",
-        "yes",
-    )
+    for name, entry in available_trackers().items():
+        t.add_row(name, escape(entry.description), "yes")
     for name, meta in available_methods().items():
         extra = meta["extra"]
         if extra is None:

@@ -2,215 +2,13 @@
 
 from __future__ import annotations
 
-import time
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import typer
 
 from relnav.cli._common import console, parse_options, progress_bar
-
-
-class PoseFormat(StrEnum):
-    """Trajectory file format of the estimate."""
-
-    tum = "tum"
-    kitti = "kitti"
-
-
-def prepare_method(
-    method: str, option: list[str] | dict[str, Any] | None
-) -> tuple[str, dict[str, Any], str | None]:
-    """Expand a preset and check the method and its options before any frame is read.
-
-    ``option`` is the ``-O key=value`` list or the dict already parsed from it.
-
-    Returns ``(method string, options, preset name or None)``; raises
-    :class:`~relnav.errors.ConfigError` (with "did you mean") for an unknown name or bad options.
-    """
-    from relnav.odometry.presets import resolve_method
-    from relnav.odometry.runner import make_tracker
-
-    parsed = option if isinstance(option, dict) else parse_options(option)
-    name, opts, preset = resolve_method(method, parsed)
-    make_tracker(name, **opts)  # builds the method: bad options fail here, not after frame 0
-    return name, opts, preset
-
-
-STATE_MAX_FRAMES = 5000
-"""Runs longer than this write the full state only on request (``--state``): it keeps about
-1.7 kB per frame in memory."""
-
-
-def _block_means(values: Any) -> dict[str, float | None]:
-    """Mean of each column of ``values`` ``(K, 4)`` over its finite steps, by block name."""
-    import numpy as np
-
-    from relnav.filtering.track_result import STATE_BLOCKS
-
-    out: dict[str, float | None] = {}
-    for name, col in zip(STATE_BLOCKS, values.T, strict=True):
-        col = col[np.isfinite(col)]
-        out[name] = float(np.mean(col)) if len(col) else None
-    return out
-
-
-def write_state_outputs(
-    out: Path,
-    run: Any,
-    gt: Any,
-    metrics: dict[str, Any],
-    steps: Any = None,
-    options: dict[str, Any] | None = None,
-) -> list[str]:
-    """The navigator's full relative state (twistor UKF on its poses): ``state.csv``,
-    ``state.png`` and, with ground truth, ``state_errors.png`` (errors with ±3σ); adds the
-    state's error summary and NEES to ``metrics`` (key ``state``). ``options`` go to
-    :func:`relnav.navigation.state.relative_state` (``angular_acceleration``, ``drift`` …)."""
-    import numpy as np
-
-    from relnav.cli.track import plot_track, plot_track_errors
-    from relnav.navigation.state import nees_band, relative_state, state_options
-
-    result = relative_state(run, steps=steps, gt_poses=gt, **state_options(options or {}))
-    result.to_csv(out / "state.csv")
-    names = ["state.csv", plot_track(result, out / "state.png").name]
-    if gt is not None:
-        names.append(plot_track_errors(result, out / "state_errors.png").name)
-        k0 = round(0.3 * len(result))
-        nees = result.nees()[k0:]
-        nees = nees[np.isfinite(nees)]
-        summary = result.summary(skip=0.3)
-        metrics["state"] = {
-            # frames whose last innovations the state's dynamics cannot follow (state.csv)
-            "innovation_alarm_frames": int(np.sum(result.innovation_alarm())),
-            "skip_fraction": 0.3,
-            "omega_rms_deg_s": summary["omega"]["rms"],
-            "omega_max_deg_s": summary["omega"]["max"],
-            "omega_sensor_rms_deg_s": summary["omega_sensor"]["rms"],
-            "omega_sensor_max_deg_s": summary["omega_sensor"]["max"],
-            "attitude_rms_deg": summary["attitude"]["rms"],
-            "position_rms_m": summary["position"]["rms"],
-            "velocity_rms_m_s": summary["velocity"]["rms"],
-            "nees_mean": float(np.mean(nees)) if len(nees) else None,
-            "nees_band_95": list(nees_band(len(nees))) if len(nees) else None,
-            # each 3-dim block alone and given the other nine (3 when consistent)
-            "nees_blocks_mean": _block_means(result.nees_blocks()[k0:]),
-            "nees_given_rest_mean": _block_means(result.nees_conditional()[k0:]),
-        }
-    return names
-
-
-def write_run_outputs(
-    out: Path,
-    run: Any,
-    seq: Any,
-    *,
-    command: str,
-    preset: str | None,
-    fmt: PoseFormat = PoseFormat.tum,
-    seed: int | None = None,
-    timings: dict[str, float] | None = None,
-    errors_plot: bool = True,
-    extra_outputs: list[str] | None = None,
-    state_steps: Any = None,
-    state_options: dict[str, Any] | None = None,
-    status: str = "complete",
-) -> dict[str, Any]:
-    """Write a run folder: estimate (TUM, and KITTI on request), diagnostics, metrics, run.json.
-
-    ``status`` goes to ``run.json`` (``complete``, ``interrupted``: Ctrl-C, the frames
-    estimated until then; ``failed``: every frame failed).
-
-    With ground truth in ``seq``, ``metrics.json`` holds every metric plus the processing time
-    and flag count, and ``errors.png`` the errors over time. Returns the metrics (``{}``
-    without ground truth).
-    """
-    import json
-
-    from relnav.eval.metrics import evaluate_trajectories
-    from relnav.io.runinfo import run_info, write_run_info
-
-    paths = run.write(out)
-    outputs = [paths["estimate"].name, paths["diagnostics"].name]
-    if "estimate_causal" in paths:  # a smoother's run: the online poses beside the smoothed
-        outputs.append(paths["estimate_causal"].name)
-    if fmt == PoseFormat.kitti:
-        import numpy as np
-
-        from relnav.io.trajectories import write_kitti
-
-        write_kitti(out / "estimate_kitti.txt", run.poses)
-        np.savetxt(out / "times.txt", run.timestamps, fmt="%.9f")
-        outputs += ["estimate_kitti.txt", "times.txt"]
-    metrics: dict[str, Any] = {}
-    gt = seq.gt_poses
-    n = len(run.poses)
-    if gt is not None and n >= 2:
-        metrics = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])
-        metrics.update(
-            time_ms=run.median_time_ms,
-            time_ms_mean=run.mean_time_ms,
-            flagged_frames=run.n_flagged,
-            method=run.method,
-            preset=preset,
-        )
-        outputs.append("metrics.json")
-        if run.causal_poses is not None:  # the online poses, as a real-time loop had them
-            causal = evaluate_trajectories(
-                run.timestamps, run.causal_poses, seq.timestamps[:n], gt[:n]
-            )
-            metrics["causal"] = {
-                k: v for k, v in causal.items() if isinstance(v, int | float) and k in metrics
-            }
-            metrics["causal"].pop("time_ms", None)  # the run's, not the trajectory's
-        if run.method == "relnav":  # the navigator's revisit test: revisits tested, failed
-            revisits = run.options.get("finalize", {}).get("revisits") or []
-            metrics.update(
-                revisit_tests=len(revisits), revisit_alarms=sum(r["alarm"] for r in revisits)
-            )
-        if errors_plot:
-            from relnav.eval.metrics import match_trajectories
-            from relnav.eval.plots import plot_errors
-
-            m = match_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])
-            label = preset or run.method
-            plot_errors(
-                out / "errors.png",
-                m.gt_poses,
-                {label: m.est_poses},
-                times=m.times,
-                title=f"{label}: error with respect to the ground truth",
-                step_sigmas=(
-                    {label: run.step_sigma[m.idx_est]} if run.step_sigma is not None else None
-                ),
-            )
-            outputs.append("errors.png")
-    frames = state_steps if state_steps is not None else run.steps
-    if run.method == "relnav" and len(frames) >= 3:
-        gt_n = gt[:n] if gt is not None else None
-        outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames, options=state_options)
-    if metrics:  # once, with the state's figures when there are some
-        from relnav.atomic import atomic_write_text
-        from relnav.cli.evaluate import json_safe
-
-        atomic_write_text(out / "metrics.json", json.dumps(json_safe(metrics), indent=2) + "\n")
-    if seed is None:  # a simulated sequence records its scenario's seed
-        scenario = getattr(seq, "scenario", None)
-        seed = scenario.get("seed") if isinstance(scenario, dict) else None
-    doc = run_info(
-        command=command,
-        run=run,
-        preset=preset,
-        sequence=seq,
-        seed=seed,
-        timings=timings,
-        outputs=[*outputs, *(extra_outputs or []), "run.json"],
-        extra={"status": status},
-    )
-    write_run_info(out, doc)
-    return metrics
+from relnav.pipeline.outputs import STATE_MAX_FRAMES, PoseFormat
 
 
 def odometry(
@@ -312,6 +110,7 @@ def odometry(
     from relnav.io.outputs import RunFolder, output_error
     from relnav.io.sources import open_sequence
     from relnav.odometry.options import check_max_frames
+    from relnav.pipeline import OdometryPipeline
 
     max_frames = check_max_frames(max_frames)
     opts = parse_options(option)
@@ -324,15 +123,15 @@ def odometry(
     if initial_pose is not None and pose_option is not None:
         raise ConfigError("--initial-pose and -O initial_pose both given; give one")
     spacing = time_spacing(rate, dt)
-    name, opts, preset = prepare_method(method, opts)
+    # a preset's own motion prior (paper1-icp-point: identity) unless the user gave one
+    pipe = OdometryPipeline(method, opts, motion_prior=motion_prior or prior)
+    name, preset = pipe.method, pipe.preset
     if attitude is not None:
-        if name != "relnav":
+        if not pipe.is_navigator:
             raise ConfigError(f"--attitude needs the navigator (method relnav), not {name!r}")
         from relnav.navigation.attitude_input import AttitudeInput
 
-        opts["attitude"] = AttitudeInput.from_tum(attitude, attitude_sigma_deg)
-    preset_prior = opts.pop("motion_prior", None)  # a preset's own (paper1-icp-point: identity)
-    motion_prior = motion_prior or prior or preset_prior or "constant_velocity"
+        pipe.options["attitude"] = AttitudeInput.from_tum(attitude, attitude_sigma_deg)
     seq = open_sequence(seq_dir, sensor=sensor, topic=topic)
     if len(seq) == 0:
         raise InputError(f"{seq_dir}: no scan files to run odometry on")
@@ -357,15 +156,14 @@ def odometry(
     from relnav.navigation.state import check_state_options
 
     if state is None:
-        state = name == "relnav" and n <= STATE_MAX_FRAMES
-    if state and name != "relnav":
+        state = pipe.is_navigator and n <= STATE_MAX_FRAMES
+    if state and not pipe.is_navigator:
         raise ConfigError("--state needs the navigator (method relnav)")
     state_opts = parse_options(state_option, flag="--state-option")
     if state_opts and not state:
         raise ConfigError("--state-option needs the full state (method relnav, --state)")
     check_state_options(state_opts)  # before the run, not after it
-    records: list[Any] | None = [] if state else None
-    if name == "relnav" and n > STATE_MAX_FRAMES and not state:
+    if pipe.is_navigator and n > STATE_MAX_FRAMES and not state:
         console.print(
             f"[yellow]{n} frames: the full relative state is skipped to keep memory flat "
             "(--state writes it)[/]"
@@ -375,15 +173,12 @@ def odometry(
             summary = _run_into(
                 folder,
                 seq,
-                name,
-                opts,
-                preset=preset,
+                pipe,
                 start=start,
                 n=n,
                 live=live,
-                records=records,
+                state=bool(state),
                 state_opts=state_opts,
-                motion_prior=motion_prior,
                 max_frames=max_frames,
                 strict=strict,
                 fmt=fmt,
@@ -396,56 +191,43 @@ def odometry(
 def _run_into(
     folder: Any,
     seq: Any,
-    name: str,
-    opts: dict[str, Any],
+    pipe: Any,
     *,
-    preset: str | None,
     start: Any,
     n: int,
     live: Any,
-    records: list[Any] | None,
+    state: bool,
     state_opts: dict[str, Any],
-    motion_prior: Any,
     max_frames: int | None,
     strict: bool,
     fmt: PoseFormat,
 ) -> dict[str, Any]:
-    """The run and its outputs, in ``folder`` (held by :class:`relnav.io.outputs.RunFolder`);
-    returns ``status``, ``interrupted`` and ``failed`` for :func:`_report`."""
+    """The run (:class:`relnav.pipeline.OdometryPipeline` ``pipe``) and its outputs, in ``folder``
+    (held by :class:`relnav.io.outputs.RunFolder`); returns ``status``, ``interrupted`` and
+    ``failed`` for :func:`_report`."""
     from rich.table import Table
 
-    from relnav.navigation.state import StateRecord
-    from relnav.odometry import run_sequence
-
     out = folder.folder
-    t0 = time.perf_counter()
     with progress_bar() as bar:
-        task = bar.add_task(preset or name, total=n)
+        task = bar.add_task(pipe.label, total=n)
 
         def step(i: int, s: Any) -> None:
             bar.advance(task)
             if live is not None:
                 live.log_frame(i, seq[i].points, s.pose)
-            if records is not None:
-                records.append(StateRecord.from_step(s))
 
-        run = run_sequence(
+        result = pipe.run(
             seq,
-            name,
+            out=out,  # streamed: memory stays flat; the state keeps its compact records
             initial_pose=start,
-            motion_prior=motion_prior,
             max_frames=max_frames,
             progress=step,
-            out=out,
-            keep_steps=False,  # memory stays flat; the state keeps its compact records
             strict=strict,
             on_interrupt="stop",  # Ctrl-C: the frames estimated are written, run.json says so
-            **opts,
+            state=state,
         )
-    wall = time.perf_counter() - t0
-    interrupted = run.options.get("interrupted")
-    all_failed = _all_failed(run)
-    status = "interrupted" if interrupted else ("failed" if all_failed else "complete")
+    run = result.run
+    interrupted, all_failed, status = result.interrupted, result.failed, result.status
     if live is not None:
         live.close()
         if live.path is not None:
@@ -457,22 +239,18 @@ def _run_into(
         live_file = [
             str(live.path.relative_to(out)) if live.path.is_relative_to(out) else str(live.path)
         ]
-    m = write_run_outputs(
-        out,
-        run,
+    m = pipe.write(
+        result,
         seq,
+        out,
         command="odometry",
-        preset=preset,
         fmt=fmt,
-        timings={"wall_s": wall},
         extra_outputs=live_file,
-        state_steps=records if records is not None and not interrupted else [],
         state_options=state_opts,
-        status=status,
     )
     if interrupted or all_failed:
         return {"status": status, "interrupted": interrupted, "failed": all_failed}
-    table = Table(title=f"odometry — {preset or name}")
+    table = Table(title=f"odometry — {pipe.label}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("frames", str(len(run.poses)))
@@ -512,18 +290,6 @@ def _run_into(
             f"[yellow]evaluation needs at least two frames ({n} estimated): metrics skipped[/]"
         )
     return {"status": status, "interrupted": None, "failed": None}
-
-
-def _all_failed(run: Any) -> str | None:
-    """The first failure's reason when every frame failed (none registered), else ``None``."""
-    counts = run.status_counts()
-    n_failed = counts.get("failed", 0)
-    if not n_failed or n_failed + counts.get("first", 0) != sum(counts.values()):
-        return None
-    for row in run.diagnostics():
-        if row.get("status") == "failed" and row.get("message"):
-            return str(row["message"])
-    return "no reason recorded"
 
 
 def _report(out: Path, folder: Any, summary: dict[str, Any]) -> None:

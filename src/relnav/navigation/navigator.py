@@ -89,6 +89,8 @@ class Navigator:
     """
 
     name = "relnav"
+    #: what a run may ask besides ``register_frame`` (:mod:`relnav.odometry.tracker`)
+    capabilities = frozenset({"skip_frame", "smoother", "final_report"})
 
     def __init__(
         self,

@@ -167,6 +167,9 @@ class Odometry:
         Options for :func:`relnav.registration.get_registration` when ``method`` is a string.
     """
 
+    #: what a run may ask besides ``register_frame`` (:mod:`relnav.odometry.tracker`)
+    capabilities = frozenset({"skip_frame", "step_check"})
+
     def __init__(
         self,
         method: str | Registration,

@@ -3,19 +3,23 @@
 ``relnav odometry SEQ --method extended`` runs the demo's best configuration without spelling
 out its options; ``relnav methods`` lists every preset with its expansion. A preset is used
 wherever a method string is: :func:`resolve_method` turns a name (preset or method string) and
-user options into the ``(method string, options)`` pair that :func:`relnav.odometry.run_sequence`
+user options into the ``(method string, options)`` pair that :func:`relnav.pipeline.run_sequence`
 takes. Options given by the user override the preset's (nested dicts are merged).
+
+Method names besides the registration families are the registered trackers (``relnav``, the
+navigator): this layer does not know them, :func:`relnav.pipeline.resolve_method` passes them
+in (``trackers``).
 """
 
 from __future__ import annotations
 
 import copy
 import difflib
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any
 
 from relnav.errors import ConfigError
-from relnav.odometry.runner import NAVIGATOR_METHOD
 
 __all__ = [
     "METHOD_PRESETS",
@@ -75,7 +79,7 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
         "source-to-target matching (the demo's 'extended')",
     ),
     "relnav-tumbling": MethodPreset(
-        NAVIGATOR_METHOD,
+        "relnav",
         {"surface": "quadric", "reanchor_frame": 20},
         "relnav's navigator for a turning target seen by a sparse flash: curved map patches and "
         "the start-up re-anchored on the map of frames 5-20 (docs/navigator.md)",
@@ -115,10 +119,10 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _known_names() -> list[str]:
+def _known_names(trackers: Collection[str] = ()) -> list[str]:
     from relnav.registration import available_methods
 
-    names = [NAVIGATOR_METHOD, *METHOD_PRESETS]
+    names = [*trackers, *METHOD_PRESETS]
     for prefix, meta in available_methods().items():
         names.append(prefix)
         names.extend(meta["examples"])
@@ -126,16 +130,20 @@ def _known_names() -> list[str]:
 
 
 def resolve_method(
-    name: str, options: dict[str, Any] | None = None
+    name: str, options: dict[str, Any] | None = None, trackers: Collection[str] = ()
 ) -> tuple[str, dict[str, Any], str | None]:
     """Expand a preset name, or check a method string's family, before any work starts.
 
     Parameters
     ----------
     name : str
-        A preset name (:data:`METHOD_PRESETS`) or a method string (``relnav methods``).
+        A preset name (:data:`METHOD_PRESETS`), a registered tracker's name or a method string
+        (``relnav methods``).
     options : dict, optional
         User options; they override a preset's options (nested dicts merged).
+    trackers : collection of str
+        The registered trackers' names (lower case; :func:`relnav.pipeline.resolve_method`
+        gives them).
 
     Returns
     -------
@@ -159,12 +167,13 @@ def resolve_method(
         p = METHOD_PRESETS[key]
         return p.method, _merge(p.options, opts), key
     prefix = key.partition(":")[0].strip().lower()
-    if key.lower() == NAVIGATOR_METHOD:
-        return NAVIGATOR_METHOD, opts, None
+    if key.lower() in trackers:
+        return key.lower(), opts, None
     if prefix not in available_methods():
-        close = difflib.get_close_matches(key.lower(), _known_names(), n=3, cutoff=0.6)
+        known = _known_names(trackers)
+        close = difflib.get_close_matches(key.lower(), known, n=3, cutoff=0.6)
         if not close:
-            close = difflib.get_close_matches(prefix, _known_names(), n=3, cutoff=0.6)
+            close = difflib.get_close_matches(prefix, known, n=3, cutoff=0.6)
         hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
         raise ConfigError(
             f"unknown method {name!r}{hint} (`relnav methods` lists methods and presets)"

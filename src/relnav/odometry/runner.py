@@ -16,13 +16,13 @@ import numpy as np
 from relnav._threads import limit_blas_threads
 from relnav.errors import ConfigError, InputError
 from relnav.odometry.odometry import MotionPrior, Odometry, OdometryStep
+from relnav.odometry.tracker import TrackerEntry, capabilities_of
 from relnav.registration.base import Registration
 from relnav.scan import Scan
 
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
     "DIAGNOSTIC_STAGES",
-    "NAVIGATOR_METHOD",
     "OdometryRun",
     "diagnostic_row",
     "make_tracker",
@@ -295,35 +295,55 @@ class _RunWriter:
             self.abort()
 
 
-NAVIGATOR_METHOD = "relnav"
-"""The method string of relnav's own frame-to-model navigator (:mod:`relnav.navigation`)."""
-NAVIGATOR_CLASS = "relnav.navigation.navigator:Navigator"
-"""Its class, by import path (loaded on first use: the navigator sits above this layer)."""
-
-
 def make_tracker(
-    method: str | Registration,
+    method: str | Registration | TrackerEntry,
     *,
     initial_pose: np.ndarray | None = None,
     motion_prior: MotionPrior = "constant_velocity",
     **method_options: Any,
 ) -> Any:
-    """The per-frame tracker for ``method``: relnav's navigator or pairwise :class:`Odometry`.
+    """The per-frame tracker for ``method``: a registered tracker or pairwise :class:`Odometry`.
 
-    Both have ``register_frame(scan) -> OdometryStep``.
+    Parameters
+    ----------
+    method : str, Registration or TrackerEntry
+        A registration method string or object (pairwise :class:`Odometry`), or a registered
+        tracker (:func:`relnav.pipeline.registry.tracker_entry`; method names such as
+        ``relnav`` are resolved to one by :mod:`relnav.pipeline`).
+    initial_pose : (4, 4) float64, optional
+        ``T_world_sensor`` of the first frame (identity by default).
+    motion_prior : {"constant_velocity", "identity"}
+        :class:`Odometry`'s prior (a registered tracker has its own motion model).
+    **method_options
+        Passed to the registration factory, :class:`Odometry` or the tracker's factory.
+
+    Returns
+    -------
+    Tracker
+        ``register_frame(scan) -> OdometryStep``, with its declared capabilities.
+
+    Raises
+    ------
+    ConfigError
+        Unknown method or bad options.
     """
-    if isinstance(method, str) and method.strip().lower() == NAVIGATOR_METHOD:
-        import importlib
+    if isinstance(method, TrackerEntry):
+        return method.build(initial_pose=initial_pose, **method_options)
+    if isinstance(method, str):
+        from relnav.registration import available_methods
 
-        module, _, cls = NAVIGATOR_CLASS.partition(":")
-        navigator = getattr(importlib.import_module(module), cls)
-        return navigator(initial_pose=initial_pose, **method_options)
+        if method.partition(":")[0].strip().lower() not in available_methods():
+            raise ConfigError(
+                f"unknown registration method {method!r}: registered trackers (e.g. the "
+                "navigator, 'relnav') and presets run through relnav.pipeline "
+                "(run_sequence, OdometryPipeline); `relnav methods` lists every name"
+            )
     return Odometry(method, initial_pose=initial_pose, motion_prior=motion_prior, **method_options)
 
 
 def run_sequence(
     sequence: Sequence[Scan],
-    method: str | Registration = "feature:hods+gcc+alphabeta",
+    method: str | Registration | TrackerEntry = "feature:hods+gcc+alphabeta",
     *,
     initial_pose: np.ndarray | str | None = "gt",
     motion_prior: MotionPrior = "constant_velocity",
@@ -344,8 +364,9 @@ def run_sequence(
     ----------
     sequence : sequence of Scan
         E.g. a :class:`relnav.io.ScanSequence`; its ``gt_poses`` (if any) give the initial pose.
-    method : str or Registration
-        Registration method (``relnav methods`` lists them).
+    method : str, Registration or TrackerEntry
+        Registration method (``relnav methods`` lists them), or a registered tracker
+        (:func:`relnav.pipeline.run_sequence` takes its name, e.g. ``relnav``).
     initial_pose : (4, 4) array, "gt", "identity" or None
         ``"gt"``: the ground truth's first pose when the sequence has one, else the identity.
     motion_prior : {"constant_velocity", "identity"}
@@ -393,6 +414,7 @@ def run_sequence(
         T0 = initial_pose
         init_source = "given" if T0 is not None else "identity"
     odo = make_tracker(method, initial_pose=T0, motion_prior=motion_prior, **method_options)
+    caps = capabilities_of(odo)
     steps: list[OdometryStep] = []
     times = np.zeros(n)
     poses = np.zeros((n, 4, 4))
@@ -409,11 +431,10 @@ def run_sequence(
                 try:
                     scan = sequence[i]
                 except InputError as e:
-                    skip = getattr(odo, "skip_frame", None)  # any odometry offering it
-                    if strict or skip is None:
+                    if strict or "skip_frame" not in caps:
                         raise
                     times[i] = _scan_time(sequence, i, times[i - 1] if i else 0.0)
-                    step = skip(f"unreadable scan: {e}")
+                    step = odo.skip_frame(f"unreadable scan: {e}")
                 else:
                     times[i] = scan.time if isinstance(scan, Scan) else float(i)
                     step = odo.register_frame(scan)
@@ -446,10 +467,9 @@ def run_sequence(
         if writer is not None:
             writer.abort()
         raise
-    finalize = getattr(odo, "finalize", None)
     causal: np.ndarray | None = None
-    if callable(finalize) and n and interrupted is None:  # e.g. the navigator's smoother
-        final = np.asarray(finalize(), dtype=float)
+    if "smoother" in caps and n and interrupted is None:  # e.g. the navigator's smoother
+        final = np.asarray(odo.finalize(), dtype=float)
         if final.shape == poses.shape and np.all(np.isfinite(final)):
             poses, causal = final, poses
     paths: dict[str, Path] = {}
@@ -462,16 +482,20 @@ def run_sequence(
             os.replace(paths["estimate"], writer.out / "estimate_causal.tum")
             paths["estimate_causal"] = writer.out / "estimate_causal.tum"
             write_tum(paths["estimate"], times, poses)
-    name = method if isinstance(method, str) else getattr(method, "name", type(method).__name__)
+    if isinstance(method, str | TrackerEntry):
+        name = method if isinstance(method, str) else method.name
+    else:
+        name = getattr(method, "name", type(method).__name__)
+    checker = odo.step_checker if "step_check" in caps else None
     meta: dict[str, Any] = {
         "motion_prior": motion_prior,
         "initial_pose": init_source,
         "method_options": method_options,
-        "step_check": getattr(getattr(odo, "step_checker", None), "mode", "off"),
+        "step_check": checker.mode if checker is not None else "off",
     }
-    report = getattr(odo, "final_report", None)  # what the tracker decided at the end
-    if callable(report) and n and interrupted is None and (final_report := report()):
-        meta["finalize"] = final_report
+    # what the tracker decided at the end
+    if "final_report" in caps and n and interrupted is None and (report := odo.final_report()):
+        meta["finalize"] = report
     if interrupted is not None:
         meta["interrupted"] = {"at_frame": interrupted, "of": n}
     run = OdometryRun(

@@ -144,12 +144,12 @@ METHOD_MODULES: tuple[str, ...] = (
     "relnav.registration.super4pcs",
     "relnav.registration.external",
     "relnav.registration.kiss_matcher",
-    "relnav.fusion.cross_source",
-    "relnav.fusion.cbd",
 )
-"""Modules whose import registers method families, by import path: loaded on first use, so
-that this lower layer never imports a higher one (``relnav.fusion`` registers paper 2's
-cross-source methods here)."""
+"""This package's modules whose import registers method families (loaded on first use, so that
+``import relnav.registration`` stays cheap). Packages above this one register their own methods
+when they are imported (paper 2's ``cga-sphere`` and ``cbd`` in :mod:`relnav.fusion`);
+:mod:`relnav.pipeline.registry`, which every command that runs a method goes through, imports
+them, so that no module here names a package above it."""
 
 
 def _load_all() -> None:
