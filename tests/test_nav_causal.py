@@ -247,9 +247,11 @@ def test_disagreement_between_the_motion_model_and_the_scan(info, fitness, needl
     from relnav.registration.result import RegistrationResult
 
     res = RegistrationResult(T_target_source=np.eye(4), fitness=fitness, info=dict(info))
-    why = disagreement(res, NavigatorConfig(flag_chi2=30.0))  # the χ² test is off by default
+    why = disagreement(res, NavigatorConfig(integrity={"flag_chi2": 30.0}))  # off by default
     assert (needle in why) if needle else why == ""
-    off = NavigatorConfig(flag_chi2=0, flag_min_fitness=0, flag_recovered=False)
+    off = NavigatorConfig(
+        integrity={"flag_chi2": 0, "flag_min_fitness": 0, "flag_recovered": False}
+    )
     assert disagreement(res, off) == ""
 
 

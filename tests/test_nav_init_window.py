@@ -92,16 +92,16 @@ def test_a_skipped_frame_inside_the_window_follows_its_neighbour(orbit_seq):
 @pytest.mark.parametrize(
     ("options", "needle"),
     [
-        ({"init_window": 2}, "at least 3"),
-        ({"init_window": -1}, "init_window"),
-        ({"init_window": 8, "init_rounds": 0}, "init_rounds"),
-        ({"init_window": 8, "init_gate": 0.0}, "init_gate"),
-        ({"init_window": 8, "init_repeat": 8}, "more than"),
-        ({"init_window": 0, "init_repeat": 12}, "more than"),
-        ({"bootstrap_frames": 5}, "set init_window=0"),
-        ({"init_window": 8, "init_solver": "gauss"}, "init_solver"),
-        ({"init_window": 8, "init_prior_scale": -1.0}, "init_prior_scale"),
-        ({"init_window": 8, "bootstrap_frames": 5}, "exclude each other"),
+        ({"startup.window": 2}, "at least 3"),
+        ({"startup.window": -1}, "startup.window"),
+        ({"startup.window": 8, "startup.rounds": 0}, "startup.rounds"),
+        ({"startup.window": 8, "startup.gate": 0.0}, "startup.gate"),
+        ({"startup.window": 8, "startup.repeat": 8}, "more than"),
+        ({"startup.window": 0, "startup.repeat": 12}, "more than"),
+        ({"startup.bootstrap_frames": 5}, "set startup.window=0"),
+        ({"startup.window": 8, "startup.solver": "gauss"}, "startup.solver"),
+        ({"startup.window": 8, "startup.prior_scale": -1.0}, "startup.prior_scale"),
+        ({"startup.window": 8, "startup.bootstrap_frames": 5}, "exclude each other"),
     ],
 )
 def test_bad_init_options_are_config_errors(options, needle):

@@ -171,10 +171,10 @@ def test_navigator_with_loop_closure_keeps_one_finite_pose_per_frame(loop_seq):
 @pytest.mark.parametrize(
     ("options", "needle"),
     [
-        ({"keyframe_every": 0}, "must be >= 1"),
-        ({"loop_min_overlap": 1.5}, "must be >= 0 and <= 1"),
-        ({"loop_closure": "maybe"}, "loop_closure='maybe'"),
-        ({"loop_kernal": 5.0}, "did you mean 'loop_kernel'"),
+        ({"loops.keyframe_every": 0}, "must be >= 1"),
+        ({"loops.min_overlap": 1.5}, "must be >= 0 and <= 1"),
+        ({"loops.enabled": "maybe"}, "loops.enabled='maybe'"),
+        ({"loops.kernal": 5.0}, "did you mean 'loops.kernel'"),
     ],
 )
 def test_bad_loop_option_is_a_config_error(options, needle):

@@ -155,8 +155,8 @@ def test_max_clique_empty_and_bounded():
 
 def test_bad_relocalisation_options():
     with pytest.raises(ConfigError, match="unknown descriptor"):
-        Navigator(reloc_descriptor="nope")
-    with pytest.raises(ConfigError, match="reloc_method"):
-        Navigator(reloc_method="ransac")
-    with pytest.raises(ConfigError, match="lost_after"):
-        Navigator(lost_after=0)
+        Navigator(reloc={"descriptor": "nope"})
+    with pytest.raises(ConfigError, match=r"reloc\.method"):
+        Navigator(reloc={"method": "ransac"})
+    with pytest.raises(ConfigError, match=r"reloc\.lost_after"):
+        Navigator(reloc={"lost_after": 0})

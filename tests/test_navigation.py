@@ -83,12 +83,13 @@ def test_bad_scan_is_flagged_and_tracking_continues(orbit_seq, bad):
 @pytest.mark.parametrize(
     ("options", "needle"),
     [
-        ({"voxel_factr": 0.3}, "did you mean 'voxel_factor'"),
-        ({"kernel": "abc"}, "kernel='abc'"),
-        ({"max_iter": 0}, "must be >= 1"),
-        ({"max_iter": 2.5}, "fractional"),
-        ({"min_overlap": 1.5}, "must be >= 0 and <= 1"),
-        ({"sigma_acc_t": float("nan")}, "NaN"),
+        ({"map.voxel_factr": 0.3}, "did you mean 'map.voxel_factor'"),
+        ({"solver.kernel": "abc"}, "solver.kernel='abc'"),
+        ({"solver.max_iter": 0}, "must be >= 1"),
+        ({"solver.max_iter": 2.5}, "fractional"),
+        ({"solver.min_overlap": 1.5}, "must be >= 0 and <= 1"),
+        ({"prior.sigma_acc_t": float("nan")}, "NaN"),
+        ({"solver": {"kernel": -1.0}}, "solver.kernel=-1.0 out of range"),
     ],
 )
 def test_bad_option_is_a_config_error(options, needle):
@@ -778,3 +779,16 @@ def test_relative_state_offset_drift_on_a_short_run(tumble_run):
     ):
         with pytest.raises(ConfigError):
             relative_state(run, steps=steps, drift="offset", **bad)
+
+
+def test_flat_option_names_of_the_last_release_still_work_with_a_warning():
+    """``-O init_window=4`` (the flat name of the last release) is ``startup.window=4``, with a
+    deprecation message naming the new name; a dotted key and a nested mapping are the same."""
+    from relnav.navigation.options import navigator_config
+
+    with pytest.warns(FutureWarning, match="'init_window' is now 'startup.window'"):
+        legacy = navigator_config({"init_window": 4, "orbit_mean_motion": 1e-3})
+    dotted = navigator_config({"startup.window": 4, "orbit.mean_motion": 1e-3})
+    nested = navigator_config({"startup": {"window": 4}, "orbit": {"mean_motion": 1e-3}})
+    assert legacy == dotted == nested
+    assert dotted.startup.window == 4 and dotted.reloc == navigator_config().reloc

@@ -110,109 +110,23 @@ OPTION_RANGES: dict[str, _Range] = {
     "voxel_size": (0, False, None, False),
     "gate_rotation_deg": (0, False, 180, True),
     "gate_translation": (0, False, None, False),
-    # relnav's navigator (relnav.navigation.NavigatorConfig)
+    # the registration adapters (relnav's navigator ranges its own options beside them:
+    # relnav.navigation.options)
     "voxel_factor": (0, False, None, False),
-    "inplane_sigma": (0, False, None, False),
-    "nonplanar_gain": (0, True, None, False),
-    "curvature_sigma": (0, False, None, False),
-    "quadric_reach": (0, True, None, False),
-    "repeat_refine": (0, True, None, False),
-    "repeat_max_points": (0, True, None, False),
-    "repeat_fraction": (0, True, 1, True),
-    "symmetry_max_ratio": (0, True, None, False),
-    "symmetry_min_arc_deg": (0, False, 360, True),
-    "symmetry_max_axial": (0, True, 1, True),
-    "symmetry_gain": (0, True, None, False),
-    "symmetry_every": (1, True, None, False),
-    "symmetry_irls": (0, True, None, False),
-    "stability_k": (0, True, None, False),
-    "stability_cap": (0, False, None, False),
-    "stability_gate": (0, False, None, False),
-    "stability_kernel": (0, False, None, False),
-    "k_neighbors": (3, True, None, False),
-    "max_voxel_weight": (1, True, None, False),
-    "max_voxels": (1, True, None, False),
     "kernel": (0, False, None, False),
     "kernel_start": (0, False, None, False),
     "tolerance": (0, False, None, False),
     "kernel_decay": (0, False, 1, True),
     "max_points": (6, True, None, False),
-    "max_map_points": (6, True, None, False),
-    "min_overlap": (0, True, 1, True),
-    "chi2_gate": (0, False, None, False),
-    "recover_rms_ratio": (0, False, None, False),
-    "min_degeneracy": (0, True, 1, False),
-    "smooth_lag": (0, True, None, False),
-    "bootstrap_frames": (0, True, None, False),
-    "init_window": (0, True, None, False),
-    "init_rounds": (1, True, None, False),
-    "init_gate": (0, False, None, False),
-    "init_repeat": (0, True, None, False),
-    "init_prior_scale": (0, False, None, False),
-    "init_inplane_sigma": (0, False, None, False),
-    "sigma_acc_t": (0, False, None, False),
-    "sigma_acc_r_deg": (0, False, 180, True),
-    "jitter_rate": (0, True, 1, True),
-    "jitter_max_deg": (0, True, 90, True),
-    "jitter_scan_margin": (0, True, None, False),
-    "jitter_starts": (0, True, None, False),
-    "jitter_start_min_deg": (0, True, 90, True),
-    "sigma_first_t": (0, False, None, False),
-    "sigma_first_r_deg": (0, False, 180, True),
-    "noise_floor": (0, False, None, False),
-    "alert_limit_t": (0, True, None, False),
-    "alert_limit_r_deg": (0, True, 180, True),
-    "protection_k": (0, False, None, False),
-    "flag_probability": (0, True, 1, False),
-    "flag_limit_t": (0, False, None, False),
-    "flag_limit_r_deg": (0, False, 180, True),
-    "flag_chi2": (0, True, None, False),
-    "flag_min_fitness": (0, True, 1, True),
-    "flag_after_frames": (0, True, None, False),
-    # its pose graph (loop_closure)
-    "keyframe_every": (1, True, None, False),
-    "keyframe_window": (0, True, None, False),
-    "loop_min_separation": (1, True, None, False),
-    "loop_max_distance": (0, False, None, False),
-    "loop_max_angle_deg": (0, False, 180, True),
-    "loop_min_overlap": (0, True, 1, True),
-    "loop_max_rms": (0, False, None, False),
-    "loop_chi2_gate": (0, False, None, False),
-    "loop_kernel": (0, False, None, False),
-    "loop_info_scale": (0, False, None, False),
-    "loop_prior_scale": (0, True, None, False),
-    "revisit_alarm_chi2": (0, True, None, False),
-    "lost_after": (1, True, None, False),
-    "reloc_every": (1, True, None, False),
-    "reloc_radius": (0, False, None, False),
-    "reloc_tau": (0, False, None, False),
-    "reloc_epsilon": (0, False, None, False),
-    "reloc_gate": (0, False, None, False),
-    "reloc_candidates": (1, True, None, False),
-    "reloc_max_map_points": (6, True, None, False),
-    "reloc_max_scan_points": (6, True, None, False),
-    "reloc_rms_ratio": (0, False, None, False),
-    "reloc_chi2": (0, False, None, False),
-    "reloc_suspect_ratio": (0, False, None, False),
-    "reloc_overlap_ratio": (0, True, 1, True),
-    "reloc_max_doubt": (0, True, None, False),
-    "reloc_min_support": (3, True, None, False),
-    "reloc_ambiguity": (0, True, 1, True),
-    # its orbit test (relnav.navigation.orbit)
-    "orbit_mean_motion": (0, True, None, False),
-    "orbit_max_symmetry": (0, False, None, False),
-    "orbit_max_misfit": (0, False, None, False),
-    "orbit_min_excess": (1, True, None, False),
 }
 """Accepted ranges of numeric options, by name, whatever the method (an option of that name
 means the same thing everywhere in relnav). Every float option must also not be NaN."""
 
-FINITE_OPTIONS: frozenset[str] = frozenset(
-    {"orbit_mean_motion", "orbit_max_symmetry", "orbit_max_misfit", "orbit_min_excess"}
-)
-"""Options that must also be finite (where an infinity is no value: a mean motion, a
-threshold the orbit test compares with); others, such as a correspondence distance, may be
-``inf`` (no limit)."""
+FINITE_OPTIONS: frozenset[str] = frozenset()
+"""Options that must also be finite (where an infinity is no value); others, such as a
+correspondence distance, may be ``inf`` (no limit). None at present: the navigator's orbit
+inputs, the former members, are checked by their own model (``allow_inf_nan=False`` in
+:class:`relnav.navigation.options.OrbitOptions`)."""
 
 
 DID_YOU_MEAN_N = 3

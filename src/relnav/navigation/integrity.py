@@ -63,12 +63,12 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
 def disagreement(result: RegistrationResult, c: NavigatorConfig) -> str:
     """Why an accepted step's motion model and scan disagree beyond what its covariance can
     say (``flag_chi2``, ``flag_min_fitness``, ``flag_recovered``), or ``""``."""
-    info = result.info
+    info, ig = result.info, c.integrity
     chi2 = float(info.get("chi2_motion", 0.0))
-    if c.flag_recovered and info.get("recovered"):
+    if ig.flag_recovered and info.get("recovered"):
         return "the motion model's prior was rejected: registered again under the weak prior"
-    if c.flag_chi2 > 0 and chi2 > c.flag_chi2:
-        return f"correction inconsistent with the motion model (χ² {chi2:.1f} > {c.flag_chi2:g})"
-    if c.flag_min_fitness > 0 and result.fitness < c.flag_min_fitness:
-        return f"{result.fitness:.0%} of the scan fits the map (< {c.flag_min_fitness:.0%})"
+    if ig.flag_chi2 > 0 and chi2 > ig.flag_chi2:
+        return f"correction inconsistent with the motion model (χ² {chi2:.1f} > {ig.flag_chi2:g})"
+    if ig.flag_min_fitness > 0 and result.fitness < ig.flag_min_fitness:
+        return f"{result.fitness:.0%} of the scan fits the map (< {ig.flag_min_fitness:.0%})"
     return ""

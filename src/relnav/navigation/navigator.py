@@ -50,7 +50,12 @@ from relnav.navigation.gicp import left_information
 from relnav.navigation.integrity import disagreement, exceedance_probability
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.multistart import rotated_starts
-from relnav.navigation.options import NavigatorConfig, in_map, loop_closer_options
+from relnav.navigation.options import (
+    NavigatorConfig,
+    in_map,
+    loop_closer_options,
+    navigator_config,
+)
 from relnav.navigation.orbit import OrbitCorrection, correct_azimuth
 from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
@@ -99,10 +104,7 @@ class Navigator:
         attitude: AttitudeInput | None = None,
         **options: Any,
     ) -> None:
-        from relnav.config import check_options
-
-        options = check_options(NavigatorConfig, options, where="method 'relnav'")
-        self.config = NavigatorConfig(**options)
+        self.config = navigator_config(options, where="method 'relnav'")
         self.attitude = attitude
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
         self.repeats = RepeatedPoints(self.config)
@@ -116,7 +118,7 @@ class Navigator:
         self._rescaled = False
         self._initial_pose = self.pose.copy()
         self._boot: list[tuple[np.ndarray, float, int, np.ndarray]] | None = (
-            [] if self.config.bootstrap_frames > 0 else None
+            [] if self.config.startup.bootstrap_frames > 0 else None
         )
         self._boot_velocity: tuple[np.ndarray, np.ndarray] | None = None
         self.loop_closer: LoopCloser | None = None
@@ -140,7 +142,7 @@ class Navigator:
 
     def _new_relocalizer(self) -> Relocalizer | None:
         c = self.config
-        return Relocalizer(c, self.solver, self._initial_pose[:3, 3]) if c.relocalise else None
+        return Relocalizer(c, self.solver, self._initial_pose[:3, 3]) if c.reloc.enabled else None
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -154,8 +156,8 @@ class Navigator:
         n_raw = len(P)
         P = P[np.all(np.isfinite(P), axis=1)]
         self.repeats.set_scan(P, self.n_frames)
-        P, _ = reduce_to_budget(P, self.config.max_points, seed=[0, self.n_frames])
-        K = self.config.bootstrap_frames
+        P, _ = reduce_to_budget(P, self.config.map.max_points, seed=[0, self.n_frames])
+        K = self.config.startup.bootstrap_frames
         if self._boot is not None:
             self._boot.append((P, t, n_raw, self.repeats.full_scan))
         out = self._track(P, t, n_raw, t_start)
@@ -222,11 +224,11 @@ class Navigator:
                 v, P_vv = self._boot_velocity
                 self.motion.reset(velocity=v, velocity_covariance=P_vv)
             self._rescaled = True
-            self.motion.start_smoothing(self.config.smooth_lag)
+            self.motion.start_smoothing(self.config.prior.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
         learn = self._settled() and self.attitude is None  # jitter: unless it is measured
-        self.motion.jitter_rate = self.config.jitter_rate if learn else 0.0
+        self.motion.jitter_rate = self.config.prior.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
         if self.attitude is not None:  # the chaser's measured rotation over the step
             T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
@@ -258,11 +260,11 @@ class Navigator:
                 st, sr = self.solver.first_sigma
                 self.motion.widen(np.array([st] * 3 + [sr] * 3))
             self.motion.update(result.T_target_source, result.info["information"])
-            if self.config.adaptive_noise:
+            if self.config.prior.adaptive_noise:
                 self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
             ts = time.perf_counter()
-            Pm = even_subset(P, self.config.max_map_points)
+            Pm = even_subset(P, self.config.map.max_map_points)
             self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
             result.info["merged"] = True  # in the map, whatever label the integrity check adds
             self.repeats.remember(self.repeats.full_scan, self.pose)
@@ -312,7 +314,9 @@ class Navigator:
         for Pm, T, frame in correction.map_frames:
             new_map.insert(Pm @ T[:3, :3].T + T[:3, 3], frame)
         self.solver.map = new_map
-        self.motion.reset(correction.pose, correction.velocity, smooth_lag=self.config.smooth_lag)
+        self.motion.reset(
+            correction.pose, correction.velocity, smooth_lag=self.config.prior.smooth_lag
+        )
         self.pose = self.motion.pose.copy()
         self.repeats.remember(self.repeats.full_scan, self.pose)
         self._prefix = correction.earlier_poses
@@ -329,26 +333,26 @@ class Navigator:
         assert m is not None
         st, sr = self.solver.first_sigma
         first = np.array([st] * 3 + [sr] * 3)
-        sv = 10.0 * m.sigma_acc if c.reloc_velocity == "keep" else first / max(self._last_dt, 1e-9)
-        zero = np.zeros(6) if c.reloc_velocity == "zero" else None
+        sv = 10.0 * m.sigma_acc if c.reloc.velocity == "keep" else first / max(self._last_dt, 1e-9)
+        zero = np.zeros(6) if c.reloc.velocity == "zero" else None
         m.reset(velocity=zero, widen=first, widen_velocity=sv)
 
     def _update_symmetry(self) -> None:
         """Test the map for an axis of rotational symmetry every ``symmetry_every`` accepted
         frames (``symmetry_max_ratio > 0``; :mod:`relnav.navigation.symmetry`)."""
         c = self.config
-        if c.symmetry_max_ratio <= 0 or self.map is None:
+        if c.symmetry.max_ratio <= 0 or self.map is None:
             return
         self._sym_count += 1
-        if self._sym_count % max(c.symmetry_every, 1):
+        if self._sym_count % max(c.symmetry.every, 1):
             return
         found = symmetry_axis(
             self.map.means,
             self.map.normals,
-            max_ratio=c.symmetry_max_ratio,
-            min_arc_deg=c.symmetry_min_arc_deg,
-            max_axial_fraction=c.symmetry_max_axial,
-            irls=c.symmetry_irls,
+            max_ratio=c.symmetry.max_ratio,
+            min_arc_deg=c.symmetry.min_arc_deg,
+            max_axial_fraction=c.symmetry.max_axial,
+            irls=c.symmetry.irls,
         )
         if (found is None) != (self.symmetry is None):
             log.info(
@@ -373,24 +377,25 @@ class Navigator:
         result.info.update(step_sigma_t=s_t, step_sigma_r_deg=s_r, step_covariance=C.copy())
         if result.status != "ok":
             return
-        pl_t, pl_r = c.protection_k * s_t, c.protection_k * s_r
+        pl_t, pl_r = c.integrity.protection_k * s_t, c.integrity.protection_k * s_r
         over = []
-        if c.alert_limit_t > 0 and pl_t > c.alert_limit_t:
-            over.append(f"translation {pl_t:.3g} m > {c.alert_limit_t:g} m")
-        if c.alert_limit_r_deg > 0 and pl_r > c.alert_limit_r_deg:
-            over.append(f"rotation {pl_r:.3g}° > {c.alert_limit_r_deg:g}°")
+        if c.integrity.alert_limit_t > 0 and pl_t > c.integrity.alert_limit_t:
+            over.append(f"translation {pl_t:.3g} m > {c.integrity.alert_limit_t:g} m")
+        if c.integrity.alert_limit_r_deg > 0 and pl_r > c.integrity.alert_limit_r_deg:
+            over.append(f"rotation {pl_r:.3g}° > {c.integrity.alert_limit_r_deg:g}°")
         if over:
             result.status = "degenerate"
             result.message = "protection level over the alert limit: " + ", ".join(over)
             return
-        if c.flag_probability > 0:
-            p = exceedance_probability(C, c.flag_limit_t, math.radians(c.flag_limit_r_deg))
+        if c.integrity.flag_probability > 0:
+            lim_t, lim_r = c.integrity.flag_limit_t, c.integrity.flag_limit_r_deg
+            p = exceedance_probability(C, lim_t, math.radians(lim_r))
             result.info["exceed_probability"] = p
-            if p > c.flag_probability:
+            if p > c.integrity.flag_probability:
                 result.status = "flagged"
                 result.message = (
-                    f"step error beyond {c.flag_limit_t:g} m or {c.flag_limit_r_deg:g}° with "
-                    f"probability {p:.2f} (> {c.flag_probability:g}) under its covariance"
+                    f"step error beyond {lim_t:g} m or {lim_r:g}° with "
+                    f"probability {p:.2f} (> {c.integrity.flag_probability:g}) under its covariance"
                 )
                 return
         why = disagreement(result, c) if self._settled() else ""
@@ -400,7 +405,7 @@ class Navigator:
     def _settled(self) -> bool:
         """Whether the motion model has seen ``flag_after_frames`` frames of the map: before,
         its corrections are it learning the velocity (no jitter learned, no disagreement flag)."""
-        return self.n_frames - self._f0 >= self.config.flag_after_frames
+        return self.n_frames - self._f0 >= self.config.integrity.flag_after_frames
 
     def skip_frame(self, reason: str) -> OdometryStep:
         """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the
@@ -440,7 +445,7 @@ class Navigator:
         (``revisit_alarm_chi2``): its scan and its step's covariance; while the revisit alarm
         stands an ``ok`` step is ``flagged``. The time it takes is added to the frame's."""
         c = self.config
-        if not (c.loop_closure or c.revisit_alarm_chi2 > 0) or self.map is None:
+        if not (c.loops.enabled or c.loops.revisit_alarm_chi2 > 0) or self.map is None:
             return out
         ts = time.perf_counter()
         if self.loop_closer is None:
@@ -450,11 +455,11 @@ class Navigator:
                 **loop_closer_options(c),
                 fallback_sigma=self.solver.first_sigma,
             )
-            if c.revisit_alarm_chi2 > 0:
-                self.revisits = RevisitCheck(self.loop_closer, c.revisit_alarm_chi2)
+            if c.loops.revisit_alarm_chi2 > 0:
+                self.revisits = RevisitCheck(self.loop_closer, c.loops.revisit_alarm_chi2)
         cov = out.result.info.get("step_covariance") if out.result is not None else None
-        Pm = None if P is None else even_subset(P, c.max_map_points)
-        if c.loop_closure:
+        Pm = None if P is None else even_subset(P, c.map.max_map_points)
+        if c.loops.enabled:
             P_pose = self.motion.P[:6, :6] if self.motion is not None else None
             self.loop_closer.observe(self.n_frames - 1, in_map(out), Pm, cov, P_pose)
         if self.revisits is not None:
@@ -470,7 +475,7 @@ class Navigator:
 
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
         c = self.config
-        if len(P) < max(c.min_points, 3):
+        if len(P) < max(c.solver.min_points, 3):
             # no map yet: keep the initial pose, wait for a usable scan
             res = RegistrationResult(
                 status="failed", message=f"only {len(P)} finite points: no map started"
@@ -486,14 +491,14 @@ class Navigator:
             )
         self.solver.spacing0 = point_spacing(P)
         self.solver.map = self.solver.new_map()
-        Pm = even_subset(P, c.max_map_points)
+        Pm = even_subset(P, c.map.max_map_points)
         self.solver.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
         self.repeats.remember(self.repeats.full_scan, self.pose)
         self.repeats.observe_rays(P, self.spacing0)
-        st0 = c.sigma_first_t * max(rms_radius(P), self.spacing0)
-        sr0 = math.radians(c.sigma_first_r_deg)
-        sa_t = c.sigma_acc_t * self.spacing0
-        sa_r = math.radians(c.sigma_acc_r_deg)
+        st0 = c.prior.sigma_first_t * max(rms_radius(P), self.spacing0)
+        sr0 = math.radians(c.prior.sigma_first_r_deg)
+        sa_t = c.prior.sigma_acc_t * self.spacing0
+        sa_r = math.radians(c.prior.sigma_acc_r_deg)
         # velocities per second need a frame period: the first one is not known yet, so the
         # filter is set up per frame period (1 s) and rescaled at the second frame.
         self.motion = ConstantVelocityFilter(
@@ -501,8 +506,8 @@ class Navigator:
             t,
             np.array([st0] * 3 + [sr0] * 3),
             np.array([sa_t] * 3 + [sa_r] * 3),
-            jitter_max=math.radians(c.jitter_max_deg) ** 2,
-            jitter_scan_margin=c.jitter_scan_margin,
+            jitter_max=math.radians(c.prior.jitter_max_deg) ** 2,
+            jitter_scan_margin=c.prior.jitter_scan_margin,
         )
         self._rescaled = False
         self._f0 = self.n_frames
@@ -523,11 +528,11 @@ class Navigator:
         c = self.config
         assert self.map is not None
         info: dict[str, Any] = {"method": self.name}
-        if len(P) < c.min_points:
+        if len(P) < c.solver.min_points:
             return RegistrationResult(
                 T_target_source=T_pred,
                 status="failed",
-                message=f"only {len(P)} finite points (< {c.min_points})",
+                message=f"only {len(P)} finite points (< {c.solver.min_points})",
                 timings=timings,
                 info=info,
             )
@@ -542,16 +547,22 @@ class Navigator:
         timings["prepare"] = time.perf_counter() - ts
         ts = time.perf_counter()
         sym = self.symmetry.twist if self.symmetry is not None else None
-        Lam_fit = stiffen_prior(Lam, sym, c.symmetry_gain) if sym is not None else Lam
+        Lam_fit = stiffen_prior(Lam, sym, c.symmetry.gain) if sym is not None else Lam
         solver = self.solver
         fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         sj = math.sqrt(self.motion.jitter_var) if self.symmetry is None else 0.0  # flat axis
-        if fit["usable"] and c.jitter_starts > 0 and sj >= math.radians(c.jitter_start_min_deg):
-            for T0 in rotated_starts(T_pred, sj, c.jitter_starts):  # other minima in the jitter
+        if (
+            fit["usable"]
+            and c.prior.jitter_starts > 0
+            and sj >= math.radians(c.prior.jitter_start_min_deg)
+        ):
+            for T0 in rotated_starts(
+                T_pred, sj, c.prior.jitter_starts
+            ):  # other minima in the jitter
                 alt = solver.solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
                 fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
         recovered = False
-        if fit["chi2"] > c.chi2_gate and fit["usable"]:
+        if fit["chi2"] > c.solver.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an
             # over-confident velocity) or the registration? Register again under the first
             # frame's weak prior; keep that answer only if the scan supports it as well.
@@ -560,14 +571,14 @@ class Navigator:
             alt = solver.solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
             if (
                 alt["usable"]
-                and alt["cond"] >= c.min_degeneracy
-                and (alt["rms"] <= c.recover_rms_ratio * fit["rms"])
+                and alt["cond"] >= c.solver.min_degeneracy
+                and (alt["rms"] <= c.solver.recover_rms_ratio * fit["rms"])
             ):
                 fit, recovered = alt, True
                 Lam = weak
         timings["register"] = time.perf_counter() - ts
         unstable = False
-        if c.stability_check and fit["usable"]:
+        if c.integrity.stability_check and fit["usable"]:
             ts = time.perf_counter()
             Lam_s = Lam if recovered else Lam_fit
             fit, unstable = solver.stability(P, fit, T_pred, Lam_s, gate, rng, radius, info)
@@ -606,35 +617,35 @@ class Navigator:
         message = ""
         if not (np.all(np.isfinite(T)) and np.all(np.isfinite(H))):
             status, message = "failed", "non-finite registration"
-        elif fit["n_pairs"] < c.min_points:
+        elif fit["n_pairs"] < c.solver.min_points:
             status, message = (
                 "failed",
-                f"{fit['n_pairs']} scan points near the model (< {c.min_points})",
+                f"{fit['n_pairs']} scan points near the model (< {c.solver.min_points})",
             )
-        elif fit["overlap"] < c.min_overlap:
+        elif fit["overlap"] < c.solver.min_overlap:
             status, message = (
                 "failed",
-                f"overlap {fit['overlap']:.2f} with the model (< {c.min_overlap})",
+                f"overlap {fit['overlap']:.2f} with the model (< {c.solver.min_overlap})",
             )
-        elif fit["cond"] < c.min_degeneracy:
+        elif fit["cond"] < c.solver.min_degeneracy:
             status, message = (
                 "degenerate",
                 f"the scan constrains too few directions (eigenvalue ratio {fit['cond']:.1e})",
             )
-        elif fit["chi2"] > c.chi2_gate and not recovered:
+        elif fit["chi2"] > c.solver.chi2_gate and not recovered:
             status, message = (
                 "failed",
                 f"correction inconsistent with the motion model (χ² {fit['chi2']:.1f} > "
-                f"{c.chi2_gate}) and not confirmed under a weak prior",
+                f"{c.solver.chi2_gate}) and not confirmed under a weak prior",
             )
         elif unstable:
             status, message = (
                 "degenerate",
                 f"unstable registration: a second start {info['stability_start_sigma']:.1f}σ "
                 f"along the weakest direction ends {info['stability_distance']:.1f}σ away "
-                f"(> {c.stability_gate})",
+                f"(> {c.integrity.stability_gate})",
             )
-            info["keep_fit"] = c.stability_pose == "fit"
+            info["keep_fit"] = c.integrity.stability_pose == "fit"
         return solver.fit_result(fit, T, H, Lam, status, message, timings, info)
 
     def finalize(self) -> np.ndarray:
@@ -649,7 +660,7 @@ class Navigator:
         pre = self._prefix
         if self.motion is None or not self._rescaled:
             poses = np.stack(online) if online else np.zeros((0, 4, 4))
-        elif self.config.smooth_lag <= 0:
+        elif self.config.prior.smooth_lag <= 0:
             poses = np.stack(online[: self._f0] + pre + online[self._f0 + len(pre) :])
         else:
             sm = self.motion.finish_smoothing()
@@ -657,13 +668,13 @@ class Navigator:
             if len(poses) != len(online):  # defensive: never a trajectory of another length
                 log.warning("smoother returned %d poses for %d frames", len(poses), len(online))
                 poses = np.stack(online)
-        if self.config.loop_closure and self.loop_closer is not None and len(poses):
+        if self.config.loops.enabled and self.loop_closer is not None and len(poses):
             corrected = self.loop_closer.correct(poses, first_frame=self._f0)
             if corrected.shape == poses.shape and np.all(np.isfinite(corrected)):
                 poses = corrected
             else:
                 log.warning("pose graph gave a non-finite trajectory: not applied")
-        if self.config.orbit_mean_motion > 0 and self.map is not None and len(poses):
+        if self.config.orbit.mean_motion > 0 and self.map is not None and len(poses):
             poses = self._orbit_azimuth(poses)
         return poses
 
@@ -694,10 +705,10 @@ class Navigator:
                 np.asarray(self._times, dtype=np.float64),
                 self.map.means,
                 self.map.normals,
-                c.orbit_mean_motion,
-                max_symmetry_ratio=c.orbit_max_symmetry,
-                max_misfit=c.orbit_max_misfit,
-                min_excess=c.orbit_min_excess,
+                c.orbit.mean_motion,
+                max_symmetry_ratio=c.orbit.max_symmetry,
+                max_misfit=c.orbit.max_misfit,
+                min_excess=c.orbit.min_excess,
             )
         except (np.linalg.LinAlgError, ValueError) as e:
             log.warning("orbit azimuth: %s: %s (poses unchanged)", type(e).__name__, e)

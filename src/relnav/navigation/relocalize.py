@@ -375,7 +375,7 @@ class Relocalizer:
     """
 
     def __init__(self, config: NavigatorConfig, solver: MapSolver, start_position: np.ndarray):
-        get_descriptor(config.reloc_descriptor)  # ConfigError now, not at the first loss
+        get_descriptor(config.reloc.descriptor)  # ConfigError now, not at the first loss
         self.config = config
         self.solver = solver
         self.start_position = np.array(start_position, dtype=float)
@@ -415,7 +415,7 @@ class Relocalizer:
         ref = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
         jump = (
             bool(info.get("recovered"))
-            or info.get("chi2_motion", 0.0) > c.reloc_chi2
+            or info.get("chi2_motion", 0.0) > c.reloc.chi2
             or self.lost > 0
         )
         overlap = float(info.get("overlap", 1.0))
@@ -423,16 +423,16 @@ class Relocalizer:
         suspect = (
             result.status == "ok"
             and np.isfinite(ref)
-            and self._doubted < c.reloc_max_doubt
+            and self._doubted < c.reloc.max_doubt
             and (
-                (jump and not rms <= c.reloc_rms_ratio * ref)
-                or not rms <= c.reloc_suspect_ratio * ref
-                or overlap < c.reloc_overlap_ratio * ref_overlap
+                (jump and not rms <= c.reloc.rms_ratio * ref)
+                or not rms <= c.reloc.suspect_ratio * ref
+                or overlap < c.reloc.overlap_ratio * ref_overlap
             )
         )
         out = result
-        if suspect or (result.status != "ok" and self.lost + 1 >= c.lost_after):
-            due = suspect or self._since_attempt + 1 >= c.reloc_every
+        if suspect or (result.status != "ok" and self.lost + 1 >= c.reloc.lost_after):
+            due = suspect or self._since_attempt + 1 >= c.reloc.every
             if due:
                 self._since_attempt = 0
                 ts = time.perf_counter()
@@ -506,8 +506,8 @@ class Relocalizer:
                 dt, dr = _distance(fit["T"], T)
                 if (
                     (dt > 0.5 or dr > 5.0)
-                    and fit["fitness"] >= (1.0 - c.reloc_ambiguity) * best["fitness"]
-                    and fit["rms"] <= (1.0 + c.reloc_ambiguity) * best["rms"]
+                    and fit["fitness"] >= (1.0 - c.reloc.ambiguity) * best["fitness"]
+                    and fit["rms"] <= (1.0 + c.reloc.ambiguity) * best["rms"]
                 ):
                     return fit
         return None
@@ -525,10 +525,10 @@ class Relocalizer:
             views = self.start_position[None]
         model = describe(
             M,
-            c.reloc_descriptor,
-            c.reloc_radius * s0,
+            c.reloc.descriptor,
+            c.reloc.radius * s0,
             viewpoints=views,
-            max_keypoints=c.reloc_max_map_points,
+            max_keypoints=c.reloc.max_map_points,
             seed=self._map_version,
         )
         self._model = (self._map_version, model)
@@ -559,7 +559,7 @@ class Relocalizer:
             What happened (for the log and the step's message).
         """
         c, solver = self.config, self.solver
-        if solver.map is None or len(P) < c.min_points:
+        if solver.map is None or len(P) < c.solver.min_points:
             return None, "no map or too few points"
         if ref_rms is None:
             ref_rms = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
@@ -567,35 +567,35 @@ class Relocalizer:
         model = self._model_description()
         scan = describe(
             P,
-            c.reloc_descriptor,
-            c.reloc_radius * s0,
-            max_keypoints=c.reloc_max_scan_points,
+            c.reloc.descriptor,
+            c.reloc.radius * s0,
+            max_keypoints=c.reloc.max_scan_points,
             seed=frame,
         )
         cands = candidate_poses(
             scan,
             model,
-            tau=c.reloc_tau,
-            epsilon=c.reloc_epsilon * s0,
-            method=c.reloc_method,
-            n_candidates=c.reloc_candidates,
-            min_size=c.reloc_min_support,
+            tau=c.reloc.tau,
+            epsilon=c.reloc.epsilon * s0,
+            method=c.reloc.method,
+            n_candidates=c.reloc.candidates,
+            min_size=c.reloc.min_support,
         )
         if not cands:
             return None, "no consistent set of descriptor matches"
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), s0)
-        gate = max(c.reloc_gate * s0, 2.0 * solver.map.voxel_size)
+        gate = max(c.reloc.gate * s0, 2.0 * solver.map.voxel_size)
         pred = solver.solve(P, T_pred, solver.weak_prior(T_pred), gate, rng, radius, primary=False)
-        limit = c.reloc_rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc_rms_ratio
+        limit = c.reloc.rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc.rms_ratio
         best: dict[str, Any] | None = None
         for T0, support in cands:
             fit = solver.solve(P, T0, solver.weak_prior(T0), gate, rng, radius, primary=False)
             ok = (
                 fit["usable"]
                 and np.all(np.isfinite(fit["T"]))
-                and fit["overlap"] >= c.min_overlap
-                and fit["cond"] >= c.min_degeneracy
+                and fit["overlap"] >= c.solver.min_overlap
+                and fit["cond"] >= c.solver.min_degeneracy
                 and fit["rms"] <= limit
                 and fit["fitness"] > pred["fitness"]
             )

@@ -107,7 +107,7 @@ class RepeatedPoints:
         """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m);
         whether they repeat the previous scan's (see the module doc). Sets :attr:`same_rays`
         and :attr:`ray_fraction`; nothing is done with ``repeat_refine`` off."""
-        if self.config.repeat_refine <= 0:
+        if self.config.solver.repeat_refine <= 0:
             return False
         u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
         self.same_rays = False
@@ -128,7 +128,7 @@ class RepeatedPoints:
     def should_test(self, frame: int) -> bool:
         """Whether to refine this frame (``repeat_refine`` on, rays not repeated, not resting
         after ``PATIENCE`` misses unless the frame is a ``RETEST``-th)."""
-        if self.config.repeat_refine <= 0 or self.same_rays:
+        if self.config.solver.repeat_refine <= 0 or self.same_rays:
             return False
         return self.misses < PATIENCE or frame % RETEST == 0
 
@@ -171,11 +171,11 @@ class RepeatedPoints:
             Whether the point-to-point answer was kept.
         """
         c = self.config
-        if not self.should_test(self.frame) or fit.n_pairs < c.min_points:
+        if not self.should_test(self.frame) or fit.n_pairs < c.solver.min_points:
             return fit, float("nan"), False
         full = self.full_scan  # repeated points are exact constraints: use them all,
-        if c.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
-            full = even_subset(full, c.repeat_max_points)
+        if c.solver.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
+            full = even_subset(full, c.solver.repeat_max_points)
         trial, frac = self.refine(
             full if len(full) > len(P) else P,
             fit.T,
@@ -187,7 +187,7 @@ class RepeatedPoints:
             spacing0,
             register,
         )
-        repeated = frac >= c.repeat_fraction
+        repeated = frac >= c.solver.repeat_fraction
         if primary:
             self.misses = 0 if repeated else self.misses + 1
         return (trial if repeated else fit), frac, repeated
@@ -229,7 +229,7 @@ class RepeatedPoints:
         fraction : float
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
-        sig = self.config.repeat_refine * spacing0
+        sig = self.config.solver.repeat_refine * spacing0
         Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(voxel_map), 3, 3)))
         fit = register(P, Om, T0, T_pred, Lam, gate, rng)
         return fit, self.evidence(P, fit.T, sig, spacing0)

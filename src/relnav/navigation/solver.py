@@ -98,7 +98,7 @@ class MapSolver:
             inlier_rmse=fit["rms"],
             n_correspondences=int(fit["n_pairs"]),
             n_inliers=int(fit["n_inliers"]),
-            converged=fit["iterations"] < self.config.max_iter,
+            converged=fit["iterations"] < self.config.solver.max_iter,
             status=status,  # type: ignore[arg-type]
             timings=timings,
             message=message,
@@ -138,12 +138,21 @@ class MapSolver:
         if not np.all(np.isfinite(ev)) or ev[0] <= 0:
             return fit, False
         sig_w = 1.0 / math.sqrt(float(ev[0]))
-        shift = min(c.stability_k * sig_w, c.stability_cap * self.map.voxel_size)
+        shift = min(
+            c.integrity.stability_k * sig_w, c.integrity.stability_cap * self.map.voxel_size
+        )
         xi0 = U[:, 0] * shift / sc
         T0 = exp_se3(xi0) @ fit["T"]
-        T_c = exp_se3(xi0) @ T_pred if c.stability_mode == "prior" else T_pred
+        T_c = exp_se3(xi0) @ T_pred if c.integrity.stability_mode == "prior" else T_pred
         alt = self.register_on_map(
-            P, self.map.information, T0, T_c, Lam, gate, rng, kernel_scale=c.stability_kernel
+            P,
+            self.map.information,
+            T0,
+            T_c,
+            Lam,
+            gate,
+            rng,
+            kernel_scale=c.integrity.stability_kernel,
         )
         # the same pipeline as the first answer: refined point to point on repeated points
         alt, _, _ = self.repeats.apply(
@@ -160,7 +169,7 @@ class MapSolver:
             stability_shift=d.copy(),
             stability_rms=rms_alt,
         )
-        unstable = dist > c.stability_gate
+        unstable = dist > c.integrity.stability_gate
         if unstable and rms_alt < fit["rms"]:
             fit = dict(fit, T=alt.T, rms=rms_alt)
         return fit, unstable
@@ -199,12 +208,12 @@ class MapSolver:
             np.ascontiguousarray(T_pred),
             np.ascontiguousarray(Lam),
             gate,
-            float(c.kernel) * kernel_scale,
-            int(c.max_iter),
-            c.tolerance * v,
-            c.tolerance * v / max(rng, 1.0),
-            c0=float(c.kernel_start) * kernel_scale,
-            decay=float(c.kernel_decay),
+            float(c.solver.kernel) * kernel_scale,
+            int(c.solver.max_iter),
+            c.solver.tolerance * v,
+            c.solver.tolerance * v / max(rng, 1.0),
+            c0=float(c.solver.kernel_start) * kernel_scale,
+            decay=float(c.solver.kernel_decay),
             information=info,
         )
 
@@ -251,7 +260,7 @@ class MapSolver:
                 self.register_on_map,
             )
         n = len(P)
-        if c.information == "normal":
+        if c.solver.information == "normal":
             H_cov = normal_information(
                 P,
                 fit.T,
@@ -260,7 +269,7 @@ class MapSolver:
                 target.normals,
                 target.information,
                 target.inplane_sigma**2,
-                float(c.kernel) ** 2,
+                float(c.solver.kernel) ** 2,
             )
         else:
             H_cov = fit.H
@@ -280,7 +289,9 @@ class MapSolver:
             "cond": degeneracy(H_cov, radius),
             "rms": rms,
             "var_factor": variance_factor(rms),
-            "usable": bool(fit.n_pairs >= c.min_points and has.sum() >= c.min_overlap * n),
+            "usable": bool(
+                fit.n_pairs >= c.solver.min_points and has.sum() >= c.solver.min_overlap * n
+            ),
             "repeat_fraction": repeat_frac,
             "repeated": repeated,
         }
@@ -290,19 +301,19 @@ class MapSolver:
         the multiples of ``s₀``), shared by its map and the pose graph's keyframe maps."""
         c, s0 = self.config, self.spacing0
         return {
-            "max_weight": c.max_voxel_weight,
-            "noise_floor": c.noise_floor * s0,
-            "inplane_sigma": c.inplane_sigma * s0,
-            "k_neighbors": c.k_neighbors,
-            "nonplanar_gain": c.nonplanar_gain,
-            "surface": c.surface,
-            "curvature_sigma": c.curvature_sigma,
-            "quadric_reach": c.quadric_reach * s0,
+            "max_weight": c.map.max_voxel_weight,
+            "noise_floor": c.map.noise_floor * s0,
+            "inplane_sigma": c.map.inplane_sigma * s0,
+            "k_neighbors": c.map.k_neighbors,
+            "nonplanar_gain": c.map.nonplanar_gain,
+            "surface": c.map.surface,
+            "curvature_sigma": c.map.curvature_sigma,
+            "quadric_reach": c.map.quadric_reach * s0,
         }
 
     def new_map(self) -> VoxelMap:
         """An empty map with the navigator's parameters (voxel ``voxel_factor · s₀``)."""
         c = self.config
         return VoxelMap(
-            c.voxel_factor * self.spacing0, max_voxels=c.max_voxels, **self.map_options()
+            c.map.voxel_factor * self.spacing0, max_voxels=c.map.max_voxels, **self.map_options()
         )

@@ -82,7 +82,11 @@ def reanchor(
     used = [f for f in frames if f.ok]
     record: dict = {"kind": "reanchor", "frames": len(frames), "accepted": False}
     first = used[0] if used else None
-    late = [f for f in used[1:] if first is not None and f.frame - first.frame >= c.reanchor_skip]
+    late = [
+        f
+        for f in used[1:]
+        if first is not None and f.frame - first.frame >= c.startup.reanchor_skip
+    ]
     if first is None or len(late) < 2 or not len(first.P):
         return record | {"reason": "too few frames in the map"}, None
     m = solver.new_map()
@@ -110,14 +114,14 @@ def reanchor(
         np.ascontiguousarray(first.pose),
         np.zeros((6, 6)),
         3.0 * st,
-        float(c.kernel),
+        float(c.solver.kernel),
         0,
         0.0,
         0.0,
-        c0=float(c.kernel),
+        c0=float(c.solver.kernel),
     )
     rms_before = at.rms
-    early = [f for f in used[1:] if f.frame - first.frame <= c.reanchor_skip]
+    early = [f for f in used[1:] if f.frame - first.frame <= c.startup.reanchor_skip]
     C_chain = start_up_covariance([f.pose for f in early], [f.step_cov for f in early])
     H = np.asarray(fit["H"]) / fit["var_factor"]
     try:
@@ -134,17 +138,17 @@ def reanchor(
         "rms_before": rms_before,
         "overlap": fit["overlap"],
     }
-    if not chi2 <= c.reanchor_gate:
-        log.debug("re-anchoring refused: χ² %.1f > %.1f", chi2, c.reanchor_gate)
+    if not chi2 <= c.startup.reanchor_gate:
+        log.debug("re-anchoring refused: χ² %.1f > %.1f", chi2, c.startup.reanchor_gate)
         return record | {"reason": "inconsistent with the start-up"}, None
-    if not gain > c.reanchor_gate:
-        log.debug("re-anchoring refused: fit gain χ² %.1f <= %.1f", gain, c.reanchor_gate)
+    if not gain > c.startup.reanchor_gate:
+        log.debug("re-anchoring refused: fit gain χ² %.1f <= %.1f", gain, c.startup.reanchor_gate)
         return record | {"reason": "no better fit"}, None
     g = log_se3(first.pose @ invert(fit["T"]))
     before = [f.pose.copy() for f in frames]
     for f in frames:
         if f is not first:
-            share = min(1.0, (f.frame - first.frame) / c.reanchor_skip)
+            share = min(1.0, (f.frame - first.frame) / c.startup.reanchor_skip)
             f.pose = exp_se3(share * g) @ f.pose
     angle = math.degrees(float(np.linalg.norm(xi[3:])))
     log.debug("re-anchored the start-up: %.2f° (χ² %.1f)", angle, chi2)

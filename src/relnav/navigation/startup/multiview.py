@@ -140,10 +140,13 @@ def _joint_refine(
     c = solver.config
     v = solver.map.voxel_size if solver.map is not None else 1.0
     lam, rounds = 1e-4, 0
-    kern = max(float(c.kernel), float(c.kernel_start))
+    kern = max(float(c.solver.kernel), float(c.solver.kernel_start))
     H, g, cost = _joint_system(solver, motion, used, gate, kern, sa, memo)
-    while rounds < c.init_rounds:
-        k_r = max(float(c.kernel), float(c.kernel_start) * float(c.kernel_decay) ** rounds)
+    while rounds < c.startup.rounds:
+        k_r = max(
+            float(c.solver.kernel),
+            float(c.solver.kernel_start) * float(c.solver.kernel_decay) ** rounds,
+        )
         rounds += 1
         if k_r != kern:
             kern = k_r
@@ -170,7 +173,7 @@ def _joint_refine(
                 f.pose = T
             lam *= 10.0
             moved = float("inf")
-        if kern <= c.kernel and (moved < 0.1 * v or lam > 1e6):
+        if kern <= c.solver.kernel and (moved < 0.1 * v or lam > 1e6):
             break
     return rounds
 
@@ -195,7 +198,7 @@ def _joint_is_surer(
     the APE worse.
     """
     H, _, _ = _joint_system(
-        solver, motion, used, gate, float(solver.config.kernel), sa, memo, regular=False
+        solver, motion, used, gate, float(solver.config.solver.kernel), sa, memo, regular=False
     )
     assert motion is not None
     try:
@@ -249,9 +252,9 @@ def _joint_system(
     k2 = kern**2
     H, g, cost = _pair_system(Y, a, b, lab, Om, k2, n)
     cost += k2 * float(len(Y) - len(a))
-    if c.init_prior in ("motion", "velocity"):
+    if c.startup.prior in ("motion", "velocity"):
         cost += _motion_terms(used, sa, H, g)
-    if c.init_prior == "velocity":
+    if c.startup.prior == "velocity":
         assert motion is not None
         cost += _velocity_terms(used, motion.velocity, motion.P[6:, 6:], H, g)
     for i, f in enumerate(used):
@@ -271,8 +274,8 @@ def _window_pairs(
     Y = np.concatenate([f.Pm @ f.pose[:3, :3].T + f.pose[:3, 3] for f in used])
     lab = np.concatenate([np.full(len(f.Pm), i) for i, f in enumerate(used)])
     tree = kd_build_select(Y, 16)
-    dn, nb = kd_knn(*tree, Y, min(c.k_neighbors, len(Y)))
-    Om, _ = plane_information(Y, nb, c.init_inplane_sigma * s0, c.noise_floor * s0)
+    dn, nb = kd_knn(*tree, Y, min(c.map.k_neighbors, len(Y)))
+    Om, _ = plane_information(Y, nb, c.startup.inplane_sigma * s0, c.map.noise_floor * s0)
     # the pair: the nearest point of another frame among the ``kq`` nearest within the gate,
     # found among the plane neighbours first, the few points they do not settle queried again
     kq = min(len(Y), 2 * n + 8)
@@ -538,27 +541,27 @@ def refine_window(
     used = [f for f in frames if f.ok]
     before = [f.pose.copy() for f in frames]
     v = solver.map.voxel_size
-    gate = float(max(c.init_gate * solver.spacing0, 2.0 * v))
+    gate = float(max(c.startup.gate * solver.spacing0, 2.0 * v))
     rounds, moved = 0, float("inf")
-    sa = c.init_prior_scale * np.array(
-        [c.sigma_acc_t * solver.spacing0] * 3 + [math.radians(c.sigma_acc_r_deg)] * 3
+    sa = c.startup.prior_scale * np.array(
+        [c.prior.sigma_acc_t * solver.spacing0] * 3 + [math.radians(c.prior.sigma_acc_r_deg)] * 3
     )
     accepted = True
-    if c.init_solver == "joint" and len(used) > 2:
+    if c.startup.solver == "joint" and len(used) > 2:
         memo: PairMemo = {}
         rounds = _joint_refine(solver, motion, used, gate, sa, memo)
-        if c.init_check and not _joint_is_surer(solver, motion, used, gate, sa, memo):
+        if c.startup.check and not _joint_is_surer(solver, motion, used, gate, sa, memo):
             accepted = False
             for f, T0 in zip(frames, before, strict=True):
                 f.pose = T0
-    while c.init_solver == "loo" and rounds < c.init_rounds and moved > 0.1 * v:
+    while c.startup.solver == "loo" and rounds < c.startup.rounds and moved > 0.1 * v:
         if len(used) <= 2:
             break
         rounds += 1
         moved = 0.0
         for i, f in enumerate(used[1:], start=1):
             T_pr, Lam = f.pose, solver.weak_prior(f.pose)
-            if c.init_prior == "motion":
+            if c.startup.prior == "motion":
                 T_pr, Lam = _neighbour_prior(used, i, sa, T_pr, Lam)
             m = solver.new_map()
             for g in used:
@@ -571,18 +574,18 @@ def refine_window(
                 np.ascontiguousarray(T_pr),
                 np.ascontiguousarray(Lam),
                 gate,
-                float(c.kernel),
-                int(c.max_iter),
-                c.tolerance * v,
-                c.tolerance * v / f.rng,
-                c0=float(c.kernel_start),
-                decay=float(c.kernel_decay),
+                float(c.solver.kernel),
+                int(c.solver.max_iter),
+                c.solver.tolerance * v,
+                c.solver.tolerance * v / f.rng,
+                c0=float(c.solver.kernel_start),
+                decay=float(c.solver.kernel_decay),
             )
             overlap = float(np.count_nonzero(fit.d2 >= 0)) / max(len(f.P), 1)
             if not (
                 np.all(np.isfinite(fit.T))
-                and fit.n_pairs >= c.min_points
-                and overlap >= c.min_overlap
+                and fit.n_pairs >= c.solver.min_points
+                and overlap >= c.solver.min_overlap
             ):
                 continue
             D = invert(f.pose) @ fit.T

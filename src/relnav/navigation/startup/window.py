@@ -84,9 +84,9 @@ class StartupWindow:
         check_window_options(config)
         c = self.config = config
         self.frames: list[WindowFrame] | None = (
-            [] if c.init_window > 0 or c.reanchor_frame > 0 else None
+            [] if c.startup.window > 0 or c.startup.reanchor_frame > 0 else None
         )
-        self.due = sorted({c.init_window, c.init_repeat, c.reanchor_frame} - {0})
+        self.due = sorted({c.startup.window, c.startup.repeat, c.startup.reanchor_frame} - {0})
         self.refinements: list[dict[str, Any]] = []
 
     @property
@@ -141,16 +141,16 @@ class StartupWindow:
         if ok:
             assert P is not None
             f.P = P
-            f.Pm = even_subset(P, c.max_map_points)
+            f.Pm = even_subset(P, c.map.max_map_points)
             f.rng = max(float(np.median(np.linalg.norm(P, axis=1))), 1.0)
         self.frames.append(f)
         if age not in self.due:
             return None
         frames = self.frames
         correction = None
-        if age in (c.init_window, c.init_repeat):
+        if age in (c.startup.window, c.startup.repeat):
             correction = self._refine(frames, solver, motion)
-        if age == c.reanchor_frame:
+        if age == c.startup.reanchor_frame:
             correction = self._reanchor(frames, solver, motion)
             if correction is not None and out.result is not None:
                 out.result.info["gauge_turn"] = correction.gauge_turn  # earlier poses: G T now
@@ -197,32 +197,33 @@ class StartupWindow:
 
 
 def check_window_options(c: NavigatorConfig) -> None:
-    """Raise :class:`~relnav.errors.ConfigError` for inconsistent ``init_*`` options."""
-    if c.init_window in (1, 2):
+    """Raise :class:`~relnav.errors.ConfigError` for inconsistent ``startup`` options."""
+    st = c.startup
+    if st.window in (1, 2):
         raise ConfigError(
-            f"method 'relnav': option init_window={c.init_window} must be 0 (off) or at "
+            f"method 'relnav': option startup.window={st.window} must be 0 (off) or at "
             "least 3 (an anchor and two frames)"
         )
-    if c.init_repeat and (c.init_window == 0 or c.init_repeat <= c.init_window):
+    if st.repeat and (st.window == 0 or st.repeat <= st.window):
         raise ConfigError(
-            f"method 'relnav': option init_repeat={c.init_repeat} must be 0 or more than "
-            f"init_window ({c.init_window})"
+            f"method 'relnav': option startup.repeat={st.repeat} must be 0 or more than "
+            f"startup.window ({st.window})"
         )
-    if c.reanchor_frame and (
-        c.reanchor_skip < 1
-        or c.reanchor_frame < c.reanchor_skip + 2
-        or c.reanchor_frame in (c.init_window, c.init_repeat)
-        or c.bootstrap_frames
+    if st.reanchor_frame and (
+        st.reanchor_skip < 1
+        or st.reanchor_frame < st.reanchor_skip + 2
+        or st.reanchor_frame in (st.window, st.repeat)
+        or st.bootstrap_frames
     ):
         raise ConfigError(
-            f"method 'relnav': option reanchor_frame={c.reanchor_frame} must be 0 (off) or at "
-            f"least reanchor_skip + 2 ({c.reanchor_skip} + 2, reanchor_skip >= 1), differ from "
-            "init_window and init_repeat, and exclude bootstrap_frames"
+            f"method 'relnav': option startup.reanchor_frame={st.reanchor_frame} must be 0 "
+            f"(off) or at least startup.reanchor_skip + 2 ({st.reanchor_skip} + 2), differ from "
+            "startup.window and startup.repeat, and exclude startup.bootstrap_frames"
         )
-    if c.init_window and c.bootstrap_frames:
+    if st.window and st.bootstrap_frames:
         raise ConfigError(
-            "method 'relnav': options init_window and bootstrap_frames exclude each other "
-            "(set init_window=0 to use bootstrap_frames)"
+            "method 'relnav': options startup.window and startup.bootstrap_frames exclude each "
+            "other (set startup.window=0 to use startup.bootstrap_frames)"
         )
 
 
@@ -271,7 +272,7 @@ def adopt_window(
             chi2_v = float(dv @ np.linalg.solve(mot.P[6:, 6:], dv))
         except np.linalg.LinAlgError:
             pass
-        if c.init_velocity == "refined":
+        if c.startup.velocity == "refined":
             velocity = v_new
     correction = StartupCorrection(
         map_frames=[(f.Pm, f.pose.copy(), f.frame) for f in used],
