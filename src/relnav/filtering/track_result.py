@@ -310,7 +310,7 @@ class TrackResult:
         **[interpretation]** A causal windowed innovation test (fault detection as in GNSS
         integrity monitoring): a run of observations that the filter's dynamics cannot follow,
         such as a navigator's map sliding at a hold point, where one step alone is within its
-        gate (``benchmarks/nav_phases.py``). ``window`` 5 and ``probability`` 0.999 were chosen
+        gate (``benchmarks/nav/nav_phases.py``). ``window`` 5 and ``probability`` 0.999 were chosen
         on envisat-tumble-64's and aura-tumble-64's random phases
         (``docs/results/nav/state_hold_point.md``).
         """

@@ -19,10 +19,10 @@ innovations' summed log-likelihood, which needs no truth (it cannot see errors t
 share, so its NEES can be off).
 
 :data:`CONTOUR_LI_ROTATING` is the model calibrated for the contour observer on Paper 2's
-simulation (``li-rotating``, 3 m, 16 frames; ``benchmarks/paper2_calibrate.py``) with Paper 2's
-initial rate, :data:`CONTOUR_LI_ROTATING_RATE_UNKNOWN` the one calibrated without it (the loop
-of ``relnav track`` without ``--omega0``); :func:`calibrated_noise` chooses between them, the
-default of ``relnav track`` with that observer.
+simulation (``li-rotating``, 3 m, 16 frames; ``benchmarks/paper2/paper2_calibrate.py``) with
+Paper 2's initial rate, :data:`CONTOUR_LI_ROTATING_RATE_UNKNOWN` the one calibrated without it
+(the loop of ``relnav track`` without ``--omega0``); :func:`calibrated_noise` chooses between
+them, the default of ``relnav track`` with that observer.
 """
 
 from __future__ import annotations
@@ -358,7 +358,7 @@ def calibrate_observer_noise(
 #: The contour observer's noise on Paper 2's simulation (``li-rotating``: Kinect v1 + HDL-64 at
 #: 3 m, 16 frames at 22.5° per frame, Paper 2's initial rate), calibrated with
 #: ``CALIBRATION_FILTER_OPTIONS`` on seeds 20-59 to a fixed point: the third round, fitted on
-#: the observations recorded with the second (``python benchmarks/paper2_calibrate.py --work
+#: the observations recorded with the second (``python benchmarks/paper2/paper2_calibrate.py --work
 #: WORK --seeds 20:60``; docs/results/paper2/observer_noise.md). Judged on seeds 0-19 in its
 #: own loop: NIS 5.71, NEES 11.5 (in the loop without the rate it gave 5.89, 12.9: that loop
 #: has its own model, :data:`CONTOUR_LI_ROTATING_RATE_UNKNOWN`). Another sensor, distance or
@@ -368,7 +368,7 @@ CONTOUR_LI_ROTATING = ObserverNoise(
     attitude=(1.3621935459175588e-3,) * 3,  # 0.078 deg
     drift_position=(3.1879865957478723e-3,) * 3,
     drift_attitude=(3.539291581571159e-3,) * 3,  # 0.203 deg
-    source="contour observer, li-rotating 3 m, seeds 20-59 (benchmarks/paper2_calibrate.py)",
+    source="contour observer, li-rotating 3 m, seeds 20-59 (benchmarks/paper2/paper2_calibrate.py)",
 )
 
 
@@ -377,7 +377,7 @@ CONTOUR_LI_ROTATING = ObserverNoise(
 #: short of the second frame, and the registration started there leaves a larger error in the
 #: model than one started on the turn: with :data:`CONTOUR_LI_ROTATING` this loop's mean NEES
 #: was 12.9 on seeds 0-19 (above its band 11.45-12.56), 12.8-13.0 on every seed set.
-#: Calibrated like it on seeds 20-59 of this loop (``benchmarks/paper2_calibrate.py --work
+#: Calibrated like it on seeds 20-59 of this loop (``benchmarks/paper2/paper2_calibrate.py --work
 #: WORK --seeds 20:60 --rate unknown``; docs/results/paper2/observer_noise.md), a fixed point at
 #: once (recorded again with it, the observations are identical). Judged on seeds 0-19 in this
 #: loop: NIS 5.78, NEES 11.9 (bands 5.61-6.40, 11.45-12.56). A single model for both loops does
@@ -388,7 +388,7 @@ CONTOUR_LI_ROTATING_RATE_UNKNOWN = ObserverNoise(
     drift_position=(3.3543908438969303e-3,) * 3,
     drift_attitude=(3.719003487962235e-3,) * 3,  # 0.213 deg
     source="contour observer, li-rotating 3 m, rate unknown, seeds 20-59 "
-    "(benchmarks/paper2_calibrate.py --rate unknown)",
+    "(benchmarks/paper2/paper2_calibrate.py --rate unknown)",
 )
 
 

@@ -56,7 +56,7 @@ poses of earlier frames change, their emitted observations do not). ``multiview_
 * ``"leave-one-out"`` — rounds (``multiview_rounds``) of re-registering every frame onto the
   union of all the others at their current poses (Gauss–Seidel, frame 0 fixed).
 
-**[measured]** (``benchmarks/paper2_experiment.py --seeds 20 --model-option multiview=true``,
+**[measured]** (``benchmarks/paper2/paper2_experiment.py --seeds 20 --model-option multiview=true``,
 docs/results/paper2/multiview.md): neither scheme removes the observer's error. The graph closes
 the loop about the spin axis (spin-attitude RMS 1.4 → 0.47°) and lowers the position RMS (10 /
 10 / 2.3 → 7.5 / 8.1 / 1.0 mm; y bias −5.4 → −0.06 mm, x bias unchanged at −5.7 mm), but the
