@@ -98,7 +98,7 @@ def profiled() -> Iterator[None]:
 def sequence_figures(folder: Path, options: dict[str, str]) -> dict[str, Any]:
     """Per step: wrong (truth), undetermined (scan), pull (m) for one ``relnav`` run."""
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(folder)
     with profiled():

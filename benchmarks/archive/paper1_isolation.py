@@ -44,7 +44,7 @@ import numpy as np
 from relnav.eval.metrics import evaluate_trajectories
 from relnav.geometry.rotations import rotation_angle
 from relnav.io.sequences import ScanSequence
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 from relnav.sim.presets import get_preset
 from relnav.sim.scenario import simulate
 

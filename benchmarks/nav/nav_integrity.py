@@ -25,7 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     from relnav.geometry.lie import log_se3
     from relnav.geometry.se3 import invert
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))

@@ -33,7 +33,7 @@ def _run(folder: Path, options: dict[str, Any]) -> dict[str, Any]:
     import relnav.navigation.navigator as nav
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(folder)
     spent: list[float] = []

@@ -78,7 +78,7 @@ def simulate_phases(out: Path, name: str, phases: int) -> list[Path]:
 def run(folder: Path, method: str, options: dict[str, str]) -> dict[str, Any]:
     """``nav_suite.run_method`` with a method preset (``relnav-tumbling``) resolved; the
     navigator's methods get ``options`` (``-O``)."""
-    from relnav.odometry.presets import resolve_method
+    from relnav.pipeline import resolve_method
 
     resolved, opts, _ = resolve_method(method, options if method.startswith("relnav") else {})
     return run_method(folder, resolved, per_step=True, **opts)
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         if a.state:
             from nav_state import report_monte_carlo, track
 
-            from relnav.odometry.presets import resolve_method
+            from relnav.pipeline import resolve_method
 
             _, options, _ = resolve_method("relnav-tumbling", opts)
             state = {"preset": "hold-point"}

@@ -123,7 +123,7 @@ def track(
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import relative_state, state_options
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(folder)
     run = run_sequence(seq, "relnav", **{**MISSION, **(options or {})})
@@ -369,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         help="the navigator's pose error: offset, wander, start-up axes (with --seeds)",
     )
     a = p.parse_args(argv)
-    from relnav.odometry.presets import resolve_method
+    from relnav.pipeline import resolve_method
 
     method, opts, _ = resolve_method(a.method, dict(kv.split("=", 1) for kv in a.options))
     if method != "relnav":
@@ -401,7 +401,7 @@ def report_error_structure(name: str, folders: list[Path], opts: dict[str, str])
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.options import in_map
     from relnav.navigation.state import StateRecord, drift_covariance
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     offsets, wander, axes, walk = [], [], [], []
     for folder in folders:
@@ -466,10 +466,11 @@ def report_error_structure(name: str, folders: list[Path], opts: dict[str, str])
 
 def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: dict) -> dict:
     """Noise scales of maximum innovation likelihood on ``name``'s noise seeds (no truth)."""
-    from relnav.io.sequences import ScanSequence
     from relnav.navigation.noise_fit import NOISE_SCALES, fit_noise_scales
+
+    from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import StateRecord
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     held = {k: v for k, v in state.items() if k not in NOISE_SCALES}
     start = [float(state.get(k, 1.0)) for k in NOISE_SCALES]

@@ -19,7 +19,7 @@ from relnav.bench.nav_suite import MISSION, simulate_suite
 from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.io.sequences import ScanSequence
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 
 
 def step_nees(seq: ScanSequence, **options: object) -> np.ndarray:

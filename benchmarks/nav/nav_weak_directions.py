@@ -57,7 +57,7 @@ def _weak_direction_figures(seq_dir: Path, options: dict[str, Any]) -> dict[str,
     from relnav.geometry.lie import log_se3
     from relnav.geometry.se3 import adjoint, invert
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(seq_dir)
     run = run_sequence(seq, "relnav", **{**MISSION, **options})

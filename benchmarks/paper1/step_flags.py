@@ -37,8 +37,7 @@ import numpy as np
 
 from relnav.geometry import invert, rotation_angle
 from relnav.io.sequences import ScanSequence
-from relnav.odometry import run_sequence
-from relnav.odometry.presets import resolve_method
+from relnav.pipeline import resolve_method, run_sequence
 
 TARGETS = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "targets"
 SEQUENCES: dict[str, list[str]] = {

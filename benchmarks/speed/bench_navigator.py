@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from relnav.io.sequences import ScanSequence
-from relnav.odometry import run_sequence
+from relnav.pipeline import run_sequence
 
 
 class _InMemory:

@@ -92,7 +92,7 @@ def worker(method: str, folder: str) -> None:
     """Run one method on one simulated sequence; print one JSON line."""
     from relnav.eval.metrics import compute_metrics
     from relnav.io.sequences import ScanSequence
-    from relnav.odometry import run_sequence
+    from relnav.pipeline import run_sequence
 
     seq = ScanSequence(folder)
     scans = [seq[k] for k in range(len(seq))]  # all in memory, as a sensor stream would be
