@@ -98,3 +98,24 @@ def test_no_module_is_over_900_lines():
         if (n := len(p.read_text(encoding="utf-8").splitlines())) > 900
     }
     assert not long, f"modules over 900 lines: {long}"
+
+
+def test_no_module_names_a_package_above_its_own_in_a_string():
+    """An import path in a string (``importlib.import_module("relnav.x.y")``, ``"pkg.mod:Class"``)
+    is an import the test above cannot see: it must not point upward either (issue 43: the
+    navigator and paper 2's methods were loaded that way from odometry and registration)."""
+    import re
+
+    path_like = re.compile(r"^relnav\.(\w+)(\.\w+)*(:\w+)?$")
+    upward = set()
+    for f in SRC.rglob("*.py"):
+        rel = f.relative_to(SRC)
+        pkg = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        if pkg == "__init__":
+            pkg = "relnav"
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                m = path_like.match(node.value)
+                if m and m.group(1) != pkg and _layer(m.group(1)) > _layer(pkg):
+                    upward.add((rel.as_posix(), node.value))
+    assert not upward, f"import paths in strings running upward: {sorted(upward)}"
