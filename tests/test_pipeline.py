@@ -197,3 +197,25 @@ def test_pipeline_run_sequence_equals_the_odometry_layer_for_a_method_string(mov
     a = run_sequence(seq, "icp-point", max_frames=4)
     b = odometry_run_sequence(seq, "icp-point", max_frames=4)
     np.testing.assert_array_equal(a.poses, b.poses)
+
+
+def test_any_form_of_method_runs_and_bad_ones_are_refused(moving_cloud, tmp_path):
+    from relnav.errors import InputError
+    from relnav.registration import get_registration
+
+    seq = ScanSequence(moving_cloud)
+    gt = np.asarray(seq.gt_poses)
+    by_class = run_pipeline(seq, _Replay, options={"poses": gt}, out=tmp_path / "cls")
+    assert by_class.method == "Replay" and by_class.run.options["finalize"] == {"frames": 8}
+    by_object = run_pipeline(seq, get_registration("icp-point"), out=tmp_path / "obj")
+    by_name = run_pipeline(seq, "icp-point", out=tmp_path / "name")
+    np.testing.assert_array_equal(by_object.run.poses, by_name.run.poses)
+    with pytest.raises(ConfigError, match="instance"):
+        OdometryPipeline(_Replay(poses=gt))
+    with pytest.raises(ConfigError, match="got int"):
+        OdometryPipeline(3)
+    with pytest.raises(InputError, match="no scans"):
+        OdometryPipeline("icp-point").run([])
+    plain = run_pipeline([s.points for s in seq][:4], "icp-point", out=tmp_path / "plain")
+    assert plain.status == "complete" and plain.metrics == {}  # no ground truth: no metrics
+    assert "metrics.json" not in plain.outputs and "estimate.tum" in plain.outputs

@@ -158,7 +158,7 @@ def write_run_outputs(
         np.savetxt(out / "times.txt", run.timestamps, fmt="%.9f")
         outputs += ["estimate_kitti.txt", "times.txt"]
     metrics: dict[str, Any] = {}
-    gt = seq.gt_poses
+    gt = getattr(seq, "gt_poses", None)  # a plain list of scans has none
     n = len(run.poses)
     if gt is not None and n >= 2:
         metrics = evaluate_trajectories(run.timestamps, run.poses, seq.timestamps[:n], gt[:n])

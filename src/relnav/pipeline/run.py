@@ -81,6 +81,33 @@ def run_sequence(sequence: Sequence[Scan], method: Any = "relnav", **kwargs: Any
     return _run_odometry(sequence, _method(method), **kwargs)
 
 
+def _as_method(method: Any, options: dict[str, Any] | None) -> tuple[str, Any, dict, str | None]:
+    """``(name, what the odometry layer runs, options, preset)`` for any form of method."""
+    from relnav.errors import ConfigError
+
+    if isinstance(method, str):
+        name, opts, preset = resolve_method(method, options)
+        return name, _method(name), opts, preset
+    opts = dict(options or {})
+    if isinstance(method, TrackerEntry):
+        return method.name, method, opts, None
+    if isinstance(method, type) and callable(getattr(method, "register_frame", None)):
+        # matplotlib drops legend labels that start with "_": a class's name without them
+        name = str(getattr(method, "name", method.__name__)).lstrip("_") or "tracker"
+        caps = frozenset(getattr(method, "capabilities", ()))
+        return name, TrackerEntry(name, method, caps), opts, None
+    if callable(getattr(method, "register_frame", None)):
+        raise ConfigError(
+            f"a {type(method).__name__} instance cannot be restarted at the run's start pose: "
+            "give its class (or register_tracker(name, cls) and its name)"
+        )
+    if callable(getattr(method, "register", None)):  # a registration object: frame to frame
+        return str(getattr(method, "name", type(method).__name__)), method, opts, None
+    raise ConfigError(
+        f"method: a name, a tracker class or a registration object, got {type(method).__name__}"
+    )
+
+
 @dataclass
 class PipelineResult:
     """What :meth:`OdometryPipeline.run` returns (and :meth:`OdometryPipeline.write` completes).
@@ -137,8 +164,10 @@ class OdometryPipeline:
 
     Parameters
     ----------
-    method : str
-        Preset name, registered tracker (``relnav``) or registration method string.
+    method : str, tracker class, TrackerEntry or Registration
+        Preset name, registered tracker (``relnav``) or registration method string; or a tracker
+        class (built as ``cls(initial_pose=T0, **options)``, :mod:`relnav.odometry.tracker`),
+        or a registration object (run frame to frame by :class:`relnav.odometry.Odometry`).
     options : dict, optional
         Method options (they override a preset's); ``motion_prior`` and ``initial_pose`` may be
         among them.
@@ -156,15 +185,15 @@ class OdometryPipeline:
 
     def __init__(
         self,
-        method: str = "relnav",
+        method: Any = "relnav",
         options: dict[str, Any] | None = None,
         *,
         motion_prior: str | None = None,
         validate: bool = True,
     ) -> None:
-        self.method, opts, self.preset = resolve_method(method, options)
+        self.method, self._target, opts, self.preset = _as_method(method, options)
         if validate:
-            make_tracker(self.method, **opts)  # bad options fail here, not after frame 0
+            make_tracker(self._target, **opts)  # bad options fail here, not after frame 0
         prior = opts.pop("motion_prior", None)
         self.motion_prior = motion_prior or prior or "constant_velocity"
         self.initial_pose = opts.pop("initial_pose", "gt")
@@ -172,8 +201,9 @@ class OdometryPipeline:
 
     @property
     def entry(self) -> TrackerEntry | None:
-        """The registered tracker the method names, or ``None`` (pairwise odometry)."""
-        return tracker_entry(self.method)
+        """The tracker the method names (registered, or the class given), or ``None``
+        (pairwise odometry)."""
+        return self._target if isinstance(self._target, TrackerEntry) else None
 
     @property
     def is_navigator(self) -> bool:
@@ -231,6 +261,10 @@ class OdometryPipeline:
         -------
         PipelineResult
         """
+        from relnav.errors import InputError
+
+        if len(sequence) == 0:
+            raise InputError("the sequence has no scans to run odometry on")
         records: list[Any] | None = [] if state else None
         on_frame = progress
         if records is not None:
@@ -244,9 +278,9 @@ class OdometryPipeline:
         start = self.initial_pose if initial_pose is None else initial_pose
         folder = Path(out) if out is not None else None
         t0 = time.perf_counter()
-        run = run_sequence(
+        run = _run_odometry(
             sequence,
-            self.method,
+            self._target,
             initial_pose=start,
             motion_prior=self.motion_prior,
             max_frames=max_frames,
