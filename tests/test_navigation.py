@@ -628,8 +628,8 @@ def test_relative_state_noise_scales_on_a_short_run(tumble_run):
     measurement covariance raises the likelihood of the innovations when the drift explains
     them; bad values are refused."""
     from relnav.errors import ConfigError
-    from relnav.navigation.noise_fit import fit_noise_scales
     from relnav.navigation.state import StateRecord, relative_state
+    from relnav.navigation.state.noise_fit import fit_noise_scales
 
     seq, run = tumble_run
     steps = [StateRecord.from_step(s) for s in run.steps]

@@ -17,9 +17,9 @@ from relnav.geometry.lie import exp_se3
 from relnav.geometry.rotations import rotation_angle
 from relnav.io.sequences import ScanSequence
 from relnav.navigation import Navigator
-from relnav.navigation import rigid_body as rigid_body_module
-from relnav.navigation import state as state_module
 from relnav.navigation.state import StateRecord, relative_state
+from relnav.navigation.state import relative as state_module
+from relnav.navigation.state import rigid_body as rigid_body_module
 from relnav.pipeline import resolve_method, run_sequence
 from relnav.sim.scenario import simulate
 
@@ -136,9 +136,9 @@ def test_reanchor_options_are_checked(options):
 
 
 def test_relnav_tumbling_preset_expands_to_the_navigator():
-    method, options, preset = resolve_method("relnav-tumbling", {"reanchor_frame": 25})
+    method, options, preset = resolve_method("relnav-tumbling", {"startup": {"reanchor_frame": 25}})
     assert method == "relnav" and preset == "relnav-tumbling"
-    assert options == {"surface": "quadric", "reanchor_frame": 25}
+    assert options == {"map": {"surface": "quadric"}, "startup": {"reanchor_frame": 25}}
 
 
 @pytest.mark.parametrize("refine", [False, True])

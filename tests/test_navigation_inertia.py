@@ -1,4 +1,4 @@
-"""A tumbling target's inertia from its body rates (relnav.navigation.inertia) and the UKF's
+"""A tumbling target's inertia from its body rates (relnav.navigation.state.inertia) and the UKF's
 torque-free prediction (TwistorUKF(inertia=…))."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from relnav.errors import ConfigError, InputError
 from relnav.filtering.ukf import TwistorUKF, euler_rates
-from relnav.navigation.inertia import InertiaFit, fit_inertia, rate_sweep_deg, refine_inertia
+from relnav.navigation.state.inertia import InertiaFit, fit_inertia, rate_sweep_deg, refine_inertia
 
 
 def _tumble(J: np.ndarray, w0: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -180,7 +180,7 @@ def test_rigid_body_pass_keeps_the_likelier_second_pass(monkeypatch):
     the likelier over the steps both have one is kept; without refinement, the rates' pass."""
     from types import SimpleNamespace
 
-    from relnav.navigation import rigid_body
+    from relnav.navigation.state import rigid_body
 
     rates_fit = InertiaFit(np.diag([0.5, 1.0, 2.0]), 1e-5, 30.0)
     attitudes_fit = InertiaFit(np.diag([0.4, 1.25, 2.0]), 2e-5, 30.0)

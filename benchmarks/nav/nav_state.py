@@ -37,8 +37,8 @@ options it compares the default relative state with the one given those options 
 ``--fit`` (with ``--seeds N``) first chooses the relative state's noise scales
 (``drift_scale``, ``drift_rotation_scale``, ``measurement_scale``) by the likelihood of the
 innovations on the SUITE sequence envisat-tumble-64's N runs, without ground truth
-(:func:`relnav.navigation.noise_fit.fit_noise_scales`, ~4 min for 20 runs), prints them and then
-reports both sequences with them (aura-tumble-64 is held out: only checked).
+(:func:`relnav.navigation.state.noise_fit.fit_noise_scales`, ~4 min for 20 runs), prints them and
+then reports both sequences with them (aura-tumble-64 is held out: only checked).
 
 ``--fresh`` (with ``--seeds N``) runs the Monte Carlo on the tumbling sequences made after a
 configuration was frozen (``nav_suite.tumbling_holdout``: voyager, iridium, orion, eros, capsule,
@@ -294,7 +294,7 @@ def report_tracked(B: np.ndarray, ape: np.ndarray, rate_deg_s: np.ndarray) -> No
 
 def report_inertia(results: list) -> None:
     """How many runs identified a tumbling target's inertia (``rigid_body``) and which fit's
-    second pass they kept (:func:`relnav.navigation.rigid_body.rigid_body_pass`)."""
+    second pass they kept (:func:`relnav.navigation.state.rigid_body.rigid_body_pass`)."""
     found = sum(bool(r.meta.get("inertia_identified")) for r in results)
     if found:
         kept = [r.meta.get("inertia_source") for r in results]
@@ -466,10 +466,9 @@ def report_error_structure(name: str, folders: list[Path], opts: dict[str, str])
 
 def fit_scales(out: Path, name: str, seeds: int, opts: dict[str, str], state: dict) -> dict:
     """Noise scales of maximum innovation likelihood on ``name``'s noise seeds (no truth)."""
-    from relnav.navigation.noise_fit import NOISE_SCALES, fit_noise_scales
-
     from relnav.io.sequences import ScanSequence
     from relnav.navigation.state import StateRecord
+    from relnav.navigation.state.noise_fit import NOISE_SCALES, fit_noise_scales
     from relnav.pipeline import run_sequence
 
     held = {k: v for k, v in state.items() if k not in NOISE_SCALES}

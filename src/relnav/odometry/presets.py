@@ -80,7 +80,7 @@ METHOD_PRESETS: dict[str, MethodPreset] = {
     ),
     "relnav-tumbling": MethodPreset(
         "relnav",
-        {"surface": "quadric", "reanchor_frame": 20},
+        {"map": {"surface": "quadric"}, "startup": {"reanchor_frame": 20}},
         "relnav's navigator for a turning target seen by a sparse flash: curved map patches and "
         "the start-up re-anchored on the map of frames 5-20 (docs/navigator.md)",
     ),

@@ -34,12 +34,13 @@ from relnav.filtering.track_result import TrackResult, TrackTruth
 from relnav.filtering.tracker import Observation, Tracker
 from relnav.geometry.rotations import hat, matrix_to_quat
 from relnav.geometry.se3 import adjoint, invert
-from relnav.navigation.inertia import InertiaFit
 from relnav.navigation.options import in_map
 from relnav.navigation.orbit import orbit_turns
-from relnav.navigation.rigid_body import rigid_body_pass
+from relnav.navigation.state.inertia import InertiaFit
+from relnav.navigation.state.rigid_body import rigid_body_pass
 
 __all__ = [
+    "TORQUE_FREE_SHARES",
     "StateRecord",
     "check_state_options",
     "drift_covariance",
@@ -306,7 +307,7 @@ def relative_state(
         ``[0, 1/M)``): how fast a dormant member can take over.
     rigid_body : bool
         **[interpretation]** (UKF only) Identify a tumbling target's inertia from the
-        estimated rates (:func:`relnav.navigation.inertia.fit_inertia`, after the first
+        estimated rates (:func:`relnav.navigation.state.inertia.fit_inertia`, after the first
         ``RIGID_BODY_SKIP_FRAMES`` frames) and run the filter again with the rate turned by
         Euler's torque-free equations (``TwistorUKF(inertia=J)``) and, as its angular
         acceleration, the fit's RMS miss (one filter, no bank); on a spin, whose rate does not
@@ -317,7 +318,7 @@ def relative_state(
     inertia_refine : bool
         With ``rigid_body``: also refine the inertia on the first pass's attitudes and keep
         the second pass whose innovations are the likelier
-        (:func:`relnav.navigation.rigid_body.rigid_body_pass`; ``meta["inertia_source"]``;
+        (:func:`relnav.navigation.state.rigid_body.rigid_body_pass`; ``meta["inertia_source"]``;
         default True).
     drift : {"step", "map"}
         How much of each step's covariance (:func:`drift_covariance`) the observer bias takes.
@@ -365,7 +366,7 @@ def relative_state(
         Scale (> 0, default 1) of each observation's covariance (the scan's ``H⁻¹`` with the
         poses' white noise). **[measured]** No setting of the three scales, fitted to the
         innovations' likelihood without the truth
-        (:func:`relnav.navigation.noise_fit.fit_noise_scales`) or to the
+        (:func:`relnav.navigation.state.noise_fit.fit_noise_scales`) or to the
         truth's NEES, brings every block of the NEES near 3 (less drift raises the position
         and velocity blocks, but the attitude block faster), and the fitted scales make
         iridium-helical-64's attitude worse (13.9 → 22.7°;

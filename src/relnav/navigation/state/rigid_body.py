@@ -2,9 +2,9 @@
 
 A first pass of the relative state (constant-rate model) gives the target's body rates and
 attitudes. :func:`rigid_body_pass` identifies the inertia's shape from them
-(:func:`~relnav.navigation.inertia.fit_inertia` on the rates, then
-:func:`~relnav.navigation.inertia.refine_inertia` on the attitudes) and runs a second pass with
-each identified inertia; the pass whose innovations are the more likely is kept
+(:func:`~relnav.navigation.state.inertia.fit_inertia` on the rates, then
+:func:`~relnav.navigation.state.inertia.refine_inertia` on the attitudes) and runs a second pass
+with each identified inertia; the pass whose innovations are the more likely is kept
 (``relative_state(rigid_body=True)``; measured in ``docs/results/nav/state_hold_point.md``).
 """
 
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from relnav.filtering.track_result import TrackResult
-from relnav.navigation.inertia import InertiaFit, fit_inertia, refine_inertia
+from relnav.navigation.state.inertia import InertiaFit, fit_inertia, refine_inertia
 
 __all__ = ["rigid_body_pass"]
 
@@ -58,8 +58,8 @@ def rigid_body_pass(
     """The relative state of a torque-free tumbling target, from a first pass.
 
     **[interpretation]** The inertia's shape is fitted to the first pass's rates after its
-    first ``skip`` steps (:func:`~relnav.navigation.inertia.fit_inertia`); with ``refine`` the
-    fit is refined on its attitudes (:func:`~relnav.navigation.inertia.refine_inertia`: a
+    first ``skip`` steps (:func:`~relnav.navigation.state.inertia.fit_inertia`); with ``refine`` the
+    fit is refined on its attitudes (:func:`~relnav.navigation.state.inertia.refine_inertia`: a
     filter's rates lag, which biases the rate fit on a near-axisymmetric tumble). A second pass
     runs with each fit; of two, the one whose innovations have the larger summed
     log-likelihood (over the steps where both have one) is kept, as a bank of filters weighs

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from relnav.errors import ConfigError
-from relnav.navigation.state import check_state_options, relative_state
+from relnav.navigation.state.relative import check_state_options, relative_state
 
 __all__ = ["NOISE_SCALES", "fit_noise_scales"]
 
