@@ -95,8 +95,9 @@ def _add_zoom(ax, series, centre: np.ndarray, half: float, dims: tuple[int, int]
     y0, y1 = ax.get_ylim()
     u = (pts[:, 0] - x0) / max(x1 - x0, 1e-12)
     v = (pts[:, 1] - y0) / max(y1 - y0, 1e-12)
-    corners = [(0.58, 0.58), (0.02, 0.58), (0.58, 0.02), (0.02, 0.02)]
-    size = 0.4
+    # margins keep the inset's own tick labels (left, below) off the view's frame and labels
+    size = 0.38
+    corners = [(0.6, 0.58), (0.13, 0.58), (0.6, 0.08), (0.13, 0.08)]
     cover = [
         int(np.sum((u >= cx) & (u <= cx + size) & (v >= cy) & (v <= cy + size)))
         for cx, cy in corners
@@ -109,7 +110,16 @@ def _add_zoom(ax, series, centre: np.ndarray, half: float, dims: tuple[int, int]
     axins.set_ylim(centre[b] - half, centre[b] + half)
     axins.set_aspect("equal", adjustable="box")
     axins.tick_params(labelsize=6)
-    axins.set_title(f"zoom ±{half:.2g} m", fontsize=7, pad=2)
+    axins.text(
+        0.03,
+        0.97,
+        f"zoom ±{half:.2g} m",
+        transform=axins.transAxes,
+        fontsize=6,
+        va="top",
+        bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1},
+        zorder=20,
+    )
     ax.indicate_inset_zoom(axins, edgecolor="0.4")
 
 

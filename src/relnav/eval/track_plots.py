@@ -37,6 +37,17 @@ def state_title(result: Any) -> str:
     return f"relnav track — {result.filter.upper()}"
 
 
+def _figure_legend(fig: Any, entries: list[tuple[str, str, str]]) -> None:
+    """One legend under the panels (``(label, colour, linestyle)``): per-panel legends sat on
+    the curves (the state's panels are full of data in every corner)."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=c, ls=ls, label=lab) for lab, c, ls in entries]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False
+    )
+
+
 def plot_track(result: Any, path: Path, *, dpi: int = 120) -> Path:
     """Estimate vs truth, 2×2 panels (a) position (b) Euler angles (c) velocity (d) ω."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -57,9 +68,17 @@ def plot_track(result: Any, path: Path, *, dpi: int = 120) -> Path:
                 )
         ax.set_title(f"({tag}) {label}")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
+    entries = [
+        ("x / roll", colors[0], "-"),
+        ("y / pitch", colors[1], "-"),
+        ("z / yaw", colors[2], "-"),
+        ("estimate", "0.2", "-"),
+    ]
+    if result.truth is not None:
+        entries.append(("truth", "0.2", "--"))
+    _figure_legend(fig, entries)
     fig.suptitle(state_title(result))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
@@ -92,7 +111,6 @@ def plot_track_errors(result: Any, path: Path, *, dpi: int = 120) -> Path:
             ax.plot(result.time, -3 * s[:, i], color=colors[i], ls=":", lw=0.8)
         ax.set_title(f"({tag}) {label}, dotted ±3σ")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
         # scaled to show the errors and the ±3σ bounds after the start-up (the first tenth
         # of the run, at least the first sample: the initial state and its huge σ may leave
         # the axes; the 95th percentile keeps the bounds' level visible)
@@ -107,6 +125,15 @@ def plot_track_errors(result: Any, path: Path, *, dpi: int = 120) -> Path:
             ax.set_ylim(-lim, lim)
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
+    _figure_legend(
+        fig,
+        [
+            ("x", colors[0], "-"),
+            ("y", colors[1], "-"),
+            ("z", colors[2], "-"),
+            ("±3σ (each axis's colour)", "0.2", ":"),
+        ],
+    )
     fig.suptitle(f"{state_title(result)}: errors")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
