@@ -170,18 +170,39 @@ def plot_compare(
     stats = ("rmse", "mean", "median", "std", "max")
     width = 0.8 / max(len(labels), 1)
     x = np.arange(len(stats))
+    bars = []
     for k, name in enumerate(labels):
         st = error_statistics(series[name][1])
-        ax_bar.bar(
-            x + (k - (len(labels) - 1) / 2) * width, [st[s] for s in stats], width, label=name
+        bars.append(
+            ax_bar.bar(
+                x + (k - (len(labels) - 1) / 2) * width, [st[s] for s in stats], width, label=name
+            )
         )
     ax_bar.set_xticks(x, stats)
     ax_bar.set_ylabel(f"{error} [{unit}]")
     ax_bar.set_title("(c) statistics (evo names), colours as in (a)")
     ax_bar.grid(True, axis="y", alpha=0.3)
-    if off:
+    if off:  # clipped like (a): the clipped runs' values are written, not hidden
         ax_box.set_ylim(0.0, lim)
         ax_bar.set_ylim(0.0, lim)
+        ticks = [
+            f"{n}\n(off scale, median {np.nanmedian(series[n][1]):.3g})" if k in off else n
+            for k, n in enumerate(labels)
+        ]
+        ax_box.set_xticks(np.arange(1, len(labels) + 1), ticks)
+        for cont in bars:
+            for rect in cont:
+                if rect.get_height() > lim:
+                    ax_bar.text(
+                        rect.get_x() + rect.get_width() / 2,
+                        0.97 * lim,
+                        f"{rect.get_height():.3g}",
+                        rotation=90,
+                        ha="center",
+                        va="top",
+                        fontsize=7,
+                        color="white",
+                    )
     if log:
         for ax in (ax_t, ax_box):
             ax.set_yscale("log", nonpositive="mask")

@@ -86,8 +86,9 @@ def _translation_errors(gt: np.ndarray | None, est: dict[str, np.ndarray]) -> di
 
 
 def _add_zoom(ax, series, centre: np.ndarray, half: float, dims: tuple[int, int]) -> None:  # type: ignore[no-untyped-def]
-    """A zoom inset of ``ax`` around ``centre`` (±``half`` m), in the axes corner that covers
-    the fewest points of ``series`` (``(xyz, style)`` pairs; ``dims`` the view's axes)."""
+    """A zoom inset of ``ax`` around ``centre`` (±``half`` m), in the axes corner (or the
+    middle) that covers the fewest points of ``series`` (``(xyz, style)`` pairs; ``dims`` the
+    view's axes)."""
     a, b = dims
     pts = np.concatenate([xyz[:, [a, b]] for xyz, _ in series if len(xyz)])
     ax.apply_aspect()
@@ -95,9 +96,10 @@ def _add_zoom(ax, series, centre: np.ndarray, half: float, dims: tuple[int, int]
     y0, y1 = ax.get_ylim()
     u = (pts[:, 0] - x0) / max(x1 - x0, 1e-12)
     v = (pts[:, 1] - y0) / max(y1 - y0, 1e-12)
-    # margins keep the inset's own tick labels (left, below) off the view's frame and labels
+    # margins keep the inset's own tick labels (left, below) off the view's frame and labels;
+    # the middle last (an orbit's view is empty inside, its corners are not)
     size = 0.38
-    corners = [(0.6, 0.58), (0.13, 0.58), (0.6, 0.08), (0.13, 0.08)]
+    corners = [(0.6, 0.58), (0.13, 0.58), (0.6, 0.08), (0.13, 0.08), (0.35, 0.33)]
     cover = [
         int(np.sum((u >= cx) & (u <= cx + size) & (v >= cy) & (v <= cy + size)))
         for cx, cy in corners
