@@ -50,19 +50,19 @@ def kernel_time(name: str, src, tgt, corr) -> float:
     if name == "kalman":
         return best_of(
             lambda: _kalman_kernel(
-                identity_state(), np.eye(12), a, b, m, 1.0, 2.5e-5, 1, 0.0, False, True
+                identity_state(), np.eye(12), a, b, m, 1.0, 2.5e-5, 1, 0.0, False, 1.0, False, True
             )
         )
     if name == "hinf":
         return best_of(
             lambda: _hinf_kernel(
-                identity_state(), np.eye(12), a, b, m, 1.0, 2.5e-5, 1e-6, 1, 0.0, False
+                identity_state(), np.eye(12), a, b, m, 1.0, 2.5e-5, 1e-6, 1, 0.0, False, 1.0, False
             )
         )
     g = 0.5 / (1 + m)
     return best_of(
         lambda: _nlms_kernel(
-            identity_state(), np.zeros(12), a, b, g, 0 * g, np.ones_like(m), 1.0, 1, 0.0
+            identity_state(), np.zeros(12), a, b, g, 0 * g, np.ones_like(m), 1.0, 1, 0.0, False
         )
     )
 
