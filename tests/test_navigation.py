@@ -247,7 +247,9 @@ def test_fixed_lag_smoother_reduces_the_error_of_noisy_poses(rng):
 
 
 def test_bootstrap_second_pass_keeps_one_pose_per_frame(orbit_seq):
-    run = run_sequence(orbit_seq, "relnav", max_frames=12, init_window=0, bootstrap_frames=4)
+    run = run_sequence(
+        orbit_seq, "relnav", max_frames=12, **{"startup.window": 0, "startup.bootstrap_frames": 4}
+    )
     assert run.poses.shape == (12, 4, 4) and np.all(np.isfinite(run.poses))
     assert all(s.status in ("first", "ok") for s in run.steps)
     err = np.linalg.norm((invert(orbit_seq.gt_poses[11]) @ run.poses[11])[:3, 3])
@@ -306,7 +308,7 @@ def monitored_runs(orbit_seq):
     """12 frames (the multi-view start included) without integrity monitoring and with an alert
     limit below every protection level."""
     free = run_sequence(orbit_seq, "relnav", max_frames=12)
-    tight = run_sequence(orbit_seq, "relnav", max_frames=12, alert_limit_t=1e-6)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=12, **{"integrity.alert_limit_t": 1e-6})
     return free, tight
 
 
@@ -341,9 +343,9 @@ def test_step_flags_label_steps_without_changing_poses(orbit_seq):
     """``flag_probability``: a step whose covariance puts its error beyond the flag limits with
     a higher probability is ``flagged`` (a label: poses identical to an unflagged run); on the
     well-observed orbit at the suite's limits (0.5 m, 5°) no step is flagged."""
-    off = run_sequence(orbit_seq, "relnav", max_frames=10, flag_probability=0.0)
+    off = run_sequence(orbit_seq, "relnav", max_frames=10, **{"integrity.flag_probability": 0.0})
     default = run_sequence(orbit_seq, "relnav", max_frames=10)
-    tight = run_sequence(orbit_seq, "relnav", max_frames=10, flag_limit_t=1e-6)
+    tight = run_sequence(orbit_seq, "relnav", max_frames=10, **{"integrity.flag_limit_t": 1e-6})
     np.testing.assert_array_equal(off.poses, default.poses)
     np.testing.assert_array_equal(off.poses, tight.poses)
     assert all(s.status in ("first", "ok") for s in default.steps)
@@ -786,8 +788,11 @@ def test_flat_option_names_of_the_last_release_still_work_with_a_warning():
     deprecation message naming the new name; a dotted key and a nested mapping are the same."""
     from relnav.navigation.options import navigator_config
 
-    with pytest.warns(FutureWarning, match="'init_window' is now 'startup.window'"):
+    with pytest.warns(FutureWarning) as caught:
         legacy = navigator_config({"init_window": 4, "orbit_mean_motion": 1e-3})
+    said = [str(w.message) for w in caught]
+    assert any("'init_window' is now 'startup.window'" in m for m in said)
+    assert any("'orbit_mean_motion' is now 'orbit.mean_motion'" in m for m in said)
     dotted = navigator_config({"startup.window": 4, "orbit.mean_motion": 1e-3})
     nested = navigator_config({"startup": {"window": 4}, "orbit": {"mean_motion": 1e-3}})
     assert legacy == dotted == nested

@@ -77,8 +77,10 @@ def test_reanchoring_removes_the_start_up_turn_of_a_tumbling_target(tumble_seq):
     """The start-up's error is a turn of the whole map; the first scan on the later map finds
     it: the attitude error of the frames after the re-anchoring falls below half."""
     gt = tumble_seq.gt_poses
-    plain = run_sequence(tumble_seq, "relnav", surface="quadric")
-    anchored = run_sequence(tumble_seq, "relnav", surface="quadric", reanchor_frame=20)
+    plain = run_sequence(tumble_seq, "relnav", **{"map.surface": "quadric"})
+    anchored = run_sequence(
+        tumble_seq, "relnav", **{"map.surface": "quadric", "startup.reanchor_frame": 20}
+    )
     before = attitude_errors_deg(plain.poses, gt)[20:].mean()
     after = attitude_errors_deg(anchored.poses, gt)[20:].mean()
     assert before > 3.0  # the start-up error the option is for
@@ -87,7 +89,9 @@ def test_reanchoring_removes_the_start_up_turn_of_a_tumbling_target(tumble_seq):
 
 
 def test_reanchoring_records_the_turn_for_the_relative_state(tumble_seq):
-    rec, steps = _reanchor_record(tumble_seq, surface="quadric", reanchor_frame=20)
+    rec, steps = _reanchor_record(
+        tumble_seq, **{"map.surface": "quadric", "startup.reanchor_frame": 20}
+    )
     assert rec["accepted"] and rec["chi2"] <= 22.46 and rec["gain_chi2"] > 22.46
     assert rec["rms"] < rec["rms_before"]
     turned = [k for k, s in enumerate(steps) if s.result and "gauge_turn" in s.result.info]
@@ -100,7 +104,7 @@ def test_reanchoring_records_the_turn_for_the_relative_state(tumble_seq):
 
 def test_reanchoring_is_refused_without_a_better_fit(still_seq):
     """A still target: the first scan fits the later map where it is, so nothing is turned."""
-    rec, steps = _reanchor_record(still_seq, reanchor_frame=20)
+    rec, steps = _reanchor_record(still_seq, **{"startup.reanchor_frame": 20})
     assert not rec["accepted"]
     assert rec["reason"] in ("no better fit", "inconsistent with the start-up")
     assert all("gauge_turn" not in (s.result.info if s.result else {}) for s in steps)
@@ -124,10 +128,10 @@ def test_gauge_turn_moves_the_earlier_frames_into_the_later_target_frame():
 @pytest.mark.parametrize(
     "options",
     [
-        {"reanchor_frame": 5},  # < reanchor_skip + 2
-        {"reanchor_frame": 10},  # the multi-view window's frame
-        {"reanchor_frame": 20, "reanchor_skip": 0},
-        {"reanchor_frame": 20, "init_window": 0, "bootstrap_frames": 3},
+        {"startup.reanchor_frame": 5},  # < reanchor_skip + 2
+        {"startup.reanchor_frame": 10},  # the multi-view window's frame
+        {"startup.reanchor_frame": 20, "startup.reanchor_skip": 0},
+        {"startup.reanchor_frame": 20, "startup.window": 0, "startup.bootstrap_frames": 3},
     ],
 )
 def test_reanchor_options_are_checked(options):
@@ -175,7 +179,9 @@ def test_rigid_body_second_pass_that_fails_keeps_the_first(monkeypatch, refine):
 
 def test_run_record_says_what_the_start_up_decided(tumble_seq):
     """``run.json``'s ``finalize`` lists the multi-view refinement and the re-anchoring."""
-    run = run_sequence(tumble_seq, "relnav", surface="quadric", reanchor_frame=20)
+    run = run_sequence(
+        tumble_seq, "relnav", **{"map.surface": "quadric", "startup.reanchor_frame": 20}
+    )
     kinds = [r["kind"] for r in run.options["finalize"]["start_up"]]
     assert kinds == ["multi-view", "reanchor"]
     assert run.options["finalize"]["start_up"][1]["accepted"] is True

@@ -293,7 +293,7 @@ def test_jitter_starts_hold_the_navigator_under_jitter(jittered):
     """Without the attitude input: the extra starts lower the rotation step error."""
     seq = ScanSequence(jittered)
     on = run_sequence(seq, "relnav")
-    off = run_sequence(seq, "relnav", jitter_starts=0)
+    off = run_sequence(seq, "relnav", **{"prior.jitter_starts": 0})
     e_on = _rotation_step_errors_deg(on.online_poses, seq.gt_poses)
     e_off = _rotation_step_errors_deg(off.online_poses, seq.gt_poses)
     assert np.sqrt(np.mean(e_on**2)) < np.sqrt(np.mean(e_off**2))  # 0.28 vs 0.30° measured

@@ -31,17 +31,22 @@ def orbit_seq(tmp_path_factory):
 @pytest.fixture(scope="module")
 def baseline(orbit_seq):
     """The tracked trajectory, without the refinement (``init_window=0``)."""
-    return run_sequence(orbit_seq, "relnav", init_window=0)
+    return run_sequence(orbit_seq, "relnav", **{"startup.window": 0})
 
 
 @pytest.mark.parametrize(
     "options",
     [
-        {"init_window": WINDOW},
-        {"init_window": WINDOW, "init_solver": "loo", "init_prior": "weak"},
-        {"init_window": WINDOW, "init_solver": "loo", "init_prior": "motion"},
-        {"init_window": WINDOW, "init_prior": "velocity", "init_velocity": "keep"},
-        {"init_window": WINDOW, "init_solver": "joint", "init_repeat": 12, "smooth_lag": 0},
+        {"startup.window": WINDOW},
+        {"startup.window": WINDOW, "startup.solver": "loo", "startup.prior": "weak"},
+        {"startup.window": WINDOW, "startup.solver": "loo", "startup.prior": "motion"},
+        {"startup.window": WINDOW, "startup.prior": "velocity", "startup.velocity": "keep"},
+        {
+            "startup.window": WINDOW,
+            "startup.solver": "joint",
+            "startup.repeat": 12,
+            "prior.smooth_lag": 0,
+        },
     ],
 )
 def test_refined_trajectory_keeps_its_length_and_is_finite(orbit_seq, options):
@@ -58,7 +63,9 @@ def test_joint_refinement_does_not_worsen_the_first_frames(orbit_seq, baseline):
     0.44° → 0.23°); the assertion only asks for no worse, with 0.05° of slack."""
     gt = orbit_seq.gt_poses
     run = run_sequence(
-        orbit_seq, "relnav", init_window=WINDOW, init_solver="joint", init_prior="motion"
+        orbit_seq,
+        "relnav",
+        **{"startup.window": WINDOW, "startup.solver": "joint", "startup.prior": "motion"},
     )
     before = attitude_errors_deg(baseline.poses[:WINDOW], gt[:WINDOW])
     after = attitude_errors_deg(run.poses[:WINDOW], gt[:WINDOW])
@@ -67,7 +74,9 @@ def test_joint_refinement_does_not_worsen_the_first_frames(orbit_seq, baseline):
 
 
 def test_refinement_is_recorded_once_per_pass(orbit_seq):
-    nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=4, init_repeat=10)
+    nav = Navigator(
+        initial_pose=orbit_seq.gt_poses[0], **{"startup.window": 4, "startup.repeat": 10}
+    )
     for k in range(12):
         nav.register_frame(orbit_seq[k])
     assert [r["frames"] for r in nav.startup.refinements] == [4, 10]
@@ -76,7 +85,9 @@ def test_refinement_is_recorded_once_per_pass(orbit_seq):
 
 
 def test_a_skipped_frame_inside_the_window_follows_its_neighbour(orbit_seq):
-    nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=6, init_solver="joint")
+    nav = Navigator(
+        initial_pose=orbit_seq.gt_poses[0], **{"startup.window": 6, "startup.solver": "joint"}
+    )
     for k in range(10):
         if k == 3:
             nav.skip_frame("unreadable")
@@ -116,12 +127,14 @@ def test_a_refused_refinement_leaves_the_tracked_trajectory(orbit_seq, baseline,
     from relnav.navigation.startup import multiview
 
     monkeypatch.setattr(multiview, "_joint_is_surer", lambda *args: False)
-    run = run_sequence(orbit_seq, "relnav", init_window=WINDOW, init_solver="joint")
+    run = run_sequence(orbit_seq, "relnav", **{"startup.window": WINDOW, "startup.solver": "joint"})
     assert np.allclose(run.poses, baseline.poses, atol=1e-9)
 
 
 def test_the_certainty_check_is_recorded(orbit_seq):
-    nav = Navigator(initial_pose=orbit_seq.gt_poses[0], init_window=WINDOW, init_solver="joint")
+    nav = Navigator(
+        initial_pose=orbit_seq.gt_poses[0], **{"startup.window": WINDOW, "startup.solver": "joint"}
+    )
     for k in range(WINDOW):
         nav.register_frame(orbit_seq[k])
     (rec,) = nav.startup.refinements

@@ -101,17 +101,17 @@ def test_navigator_passes_the_gain_to_its_map_and_checks_it(tmp_path):
     sparse orbit of an asteroid (smooth, nearly planar patches) the gain barely changes the
     steps."""
     with pytest.raises(ConfigError, match="nonplanar_gain"):
-        Navigator(nonplanar_gain=-1.0)
+        Navigator(**{"map.nonplanar_gain": -1.0})
     sc = flash_orbit("nav-nonplanar", max_frames=8)
     simulate(sc, tmp_path / "seq")
     from relnav.io.sequences import ScanSequence
 
     seq = ScanSequence(tmp_path / "seq")
-    nav = Navigator(initial_pose=seq.gt_poses[0], nonplanar_gain=100.0)
+    nav = Navigator(initial_pose=seq.gt_poses[0], **{"map.nonplanar_gain": 100.0})
     for scan in seq:
         nav.register_frame(scan)
     assert nav.map is not None and nav.map.nonplanar_gain == 100.0
     off = run_sequence(seq, "relnav")
-    on = run_sequence(seq, "relnav", nonplanar_gain=100.0)
+    on = run_sequence(seq, "relnav", **{"map.nonplanar_gain": 100.0})
     d = [np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(off.poses, on.poses, strict=True)]
     assert max(d) < 0.1, d  # measured 0.03 m

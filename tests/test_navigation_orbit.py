@@ -184,12 +184,12 @@ def test_navigator_records_its_verdict():
         P = pts[rng.choice(len(pts), 800, replace=False)] @ Tinv[:3, :3].T + Tinv[:3, 3]
         scans.append(Scan(points=P[P[:, 2] > 0], time=float(tk)))  # roughly what faces it
     run = run_sequence(
-        scans, "relnav", initial_pose=truth[0], orbit_mean_motion=N_LEO, init_window=0
+        scans, "relnav", initial_pose=truth[0], **{"orbit.mean_motion": N_LEO, "startup.window": 0}
     )
     assert run.poses.shape == (12, 4, 4) and np.all(np.isfinite(run.poses))
     verdict = run.options["finalize"]["orbit"]
     assert verdict["reason"] and isinstance(verdict["applied"], bool)
-    off = run_sequence(scans, "relnav", initial_pose=truth[0], init_window=0)
+    off = run_sequence(scans, "relnav", initial_pose=truth[0], **{"startup.window": 0})
     assert "finalize" not in off.options
 
 
@@ -202,7 +202,7 @@ def test_a_skipped_frame_keeps_times_and_poses_aligned():
     rng = np.random.default_rng(7)
     pts, _ = _body_of_revolution(rng)
     truth, t = _trajectory(np.array([35.0, 0.0, 10.0]), np.array([0.0, 60.0, -8.0]), frames=12)
-    nav = Navigator(initial_pose=truth[0], orbit_mean_motion=N_LEO, init_window=0)
+    nav = Navigator(initial_pose=truth[0], **{"orbit.mean_motion": N_LEO, "startup.window": 0})
     for k, (T, tk) in enumerate(zip(truth, t, strict=True)):
         if k in (0, 5):  # before the first scan and in the middle
             nav.skip_frame("unreadable")

@@ -150,9 +150,9 @@ def _track(seq, **options):
 
 
 def test_navigator_with_loop_closure_keeps_one_finite_pose_per_frame(loop_seq):
-    opts = {"keyframe_every": 3, "loop_min_separation": 6}
+    opts = {"loops.keyframe_every": 3, "loops.min_separation": 6}
     _, online_off, final_off = _track(loop_seq, **opts)
-    nav, online_on, final_on = _track(loop_seq, loop_closure=True, **opts)
+    nav, online_on, final_on = _track(loop_seq, **{"loops.enabled": True}, **opts)
     assert final_on.shape == final_off.shape == (len(loop_seq), 4, 4)
     assert np.all(np.isfinite(final_on))
     # revisits were found and registered, and the graph moved the trajectory

@@ -168,7 +168,9 @@ def test_can_turned_about_its_axis_keeps_the_predicted_turn(surface, rng):
 def test_quadric_option_reaches_the_map(rng):
     """``surface="quadric"`` gives the navigator's map curved patches with its reach and
     curvature prior; the default keeps planes."""
-    nav = Navigator(surface="quadric", quadric_reach=2.0, curvature_sigma=0.5)
+    nav = Navigator(
+        **{"map.surface": "quadric", "map.quadric_reach": 2.0, "map.curvature_sigma": 0.5}
+    )
     nav.solver.spacing0 = 0.4
     m = nav.solver.new_map()
     assert m.surface_model == "quadric" and m.quadric_reach == pytest.approx(0.8)
@@ -177,7 +179,11 @@ def test_quadric_option_reaches_the_map(rng):
     normals, quad = m.surface  # type: ignore[misc]
     assert normals.shape == (50, 3) and quad.shape == (50, 11)
     assert VoxelMap(0.1).surface is None
-    for bad in ({"surface": "cubic"}, {"curvature_sigma": 0.0}, {"quadric_reach": float("nan")}):
+    for bad in (
+        {"surface": "cubic"},
+        {"curvature_sigma": 0.0},
+        {"quadric_reach": float("nan")},
+    ):
         with pytest.raises(ValueError, match=next(iter(bad))):
             VoxelMap(0.1, **bad)
 
@@ -188,7 +194,11 @@ def test_quadric_navigator_tracks_a_short_orbit_with_its_revisit_maps(tmp_path):
     is within 0.2 m of the truth (measured 0.11 m; 0.25 m with planes on this run)."""
     simulate(flash_orbit("nav-quadric", max_frames=12), tmp_path / "seq")
     seq = ScanSequence(tmp_path / "seq")
-    run = run_sequence(seq, "relnav", surface="quadric", loop_closure=True, keyframe_every=3)
+    run = run_sequence(
+        seq,
+        "relnav",
+        **{"map.surface": "quadric", "loops.enabled": True, "loops.keyframe_every": 3},
+    )
     assert all(s.status in ("ok", "first") for s in run.steps)
     err = [
         np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(run.poses, seq.gt_poses, strict=True)

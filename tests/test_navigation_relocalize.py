@@ -61,10 +61,10 @@ KIDNAP = list(range(0, 15)) + list(range(25, 36))  # 10 frames (36° of orbit, ~
 def test_kidnapped_navigator_is_relocalised(orbit, method):
     gt = orbit.gt_poses
     i0 = KIDNAP.index(25)
-    _, off = _run(orbit, KIDNAP, relocalise=False)
+    _, off = _run(orbit, KIDNAP, **{"reloc.enabled": False})
     # without relocalisation the navigator tracks a corrupted map: tens of metres off
     assert _error(off[-1].pose, gt[KIDNAP[-1]])[0] > 10.0
-    nav, on = _run(orbit, KIDNAP, reloc_method=method)
+    nav, on = _run(orbit, KIDNAP, **{"reloc.method": method})
     first = [
         i for i, s in enumerate(on) if s.result is not None and s.result.info.get("relocalised")
     ]
@@ -97,7 +97,7 @@ def test_attempts_are_spaced_while_lost(orbit):
     junk = [rng.normal(size=(250, 3)) * 5.0 + [50.0, 0.0, 0.0] for _ in range(9)]
     counts = []
     for every in (1, 3):
-        nav, steps = _run(orbit, list(range(12)), reloc_every=every)
+        nav, steps = _run(orbit, list(range(12)), **{"reloc.every": every})
         steps += [nav.register_frame(p) for p in junk]
         counts.append(_attempted(steps))
     assert counts[0] >= 6 and counts[1] < counts[0]
@@ -114,7 +114,7 @@ def test_unrelated_object_does_not_relocalise(orbit, other_target):
 def test_no_loss_no_relocalisation(orbit):
     frames = list(range(24))
     nav_on, on = _run(orbit, frames)
-    nav_off, off = _run(orbit, frames, relocalise=False)
+    nav_off, off = _run(orbit, frames, **{"reloc.enabled": False})
     assert _attempted(on) == 0
     np.testing.assert_array_equal(np.stack([s.pose for s in on]), np.stack([s.pose for s in off]))
     np.testing.assert_array_equal(nav_on.finalize(), nav_off.finalize())

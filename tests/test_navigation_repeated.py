@@ -54,7 +54,7 @@ def test_repeated_points_are_detected_and_registered_point_to_point(fixed_seq):
     # and far better than the navigator without the refinement (0.32 m: the first step slides
     # along the surface)
     assert err <= _rms_step_error(run_sequence(fixed_seq, "icp-point").poses, gt)
-    off = run_sequence(fixed_seq, "relnav", repeat_refine=0)
+    off = run_sequence(fixed_seq, "relnav", **{"solver.repeat_refine": 0})
     assert not any(_repeated(off))
     assert err < 0.5 * _rms_step_error(off.poses, gt)
 
@@ -64,7 +64,7 @@ def test_fresh_surface_samples_are_not_repeated_points(fresh_seq):
     assert not any(_repeated(run))
     fractions = [s.result.info["repeat_fraction"] for s in run.steps if s.result is not None]
     assert max(f for f in fractions if np.isfinite(f)) < 0.2
-    off = run_sequence(fresh_seq, "relnav", repeat_refine=0)
+    off = run_sequence(fresh_seq, "relnav", **{"solver.repeat_refine": 0})
     np.testing.assert_allclose(run.poses, off.poses, atol=1e-9)
 
 
@@ -78,10 +78,12 @@ def test_a_fixed_pixel_pattern_is_not_taken_for_repeated_points(tmp_path):
     info = [s.result.info for s in run.steps if s.result is not None]
     assert all(i["same_rays"] > 0.9 for i in info)
     assert all(np.isnan(i["repeat_fraction"]) and not i["repeated_points"] for i in info)
-    np.testing.assert_array_equal(run.poses, run_sequence(seq, "relnav", repeat_refine=0).poses)
+    np.testing.assert_array_equal(
+        run.poses, run_sequence(seq, "relnav", **{"solver.repeat_refine": 0}).poses
+    )
 
 
-@pytest.mark.parametrize("bad", [{"repeat_refine": -0.1}, {"repeat_fraction": 1.5}])
+@pytest.mark.parametrize("bad", [{"solver.repeat_refine": -0.1}, {"solver.repeat_fraction": 1.5}])
 def test_bad_repeat_options_are_one_config_error(bad) -> None:
     from relnav.errors import ConfigError
     from relnav.navigation import Navigator
@@ -94,8 +96,12 @@ def test_the_bootstrap_pass_refines_each_frame_with_its_own_scan(fixed_seq):
     """``bootstrap_frames`` tracks the first frames a second time: each must be refined with its
     own whole scan (not the latest frame's), so the second pass keeps the refinement's accuracy."""
     gt = fixed_seq.gt_poses
-    boot = run_sequence(fixed_seq, "relnav", init_window=0, bootstrap_frames=3)
-    off = run_sequence(fixed_seq, "relnav", repeat_refine=0, init_window=0, bootstrap_frames=3)
+    boot = run_sequence(fixed_seq, "relnav", **{"startup.window": 0, "startup.bootstrap_frames": 3})
+    off = run_sequence(
+        fixed_seq,
+        "relnav",
+        **{"solver.repeat_refine": 0, "startup.window": 0, "startup.bootstrap_frames": 3},
+    )
     assert _rms_step_error(boot.poses, gt) < 0.5 * _rms_step_error(off.poses, gt)
 
 
@@ -114,6 +120,8 @@ def test_the_refinement_uses_at_most_repeat_max_points_and_still_finds_the_repea
         return original(self, P, *args, **kwargs)
 
     monkeypatch.setattr(RepeatedPoints, "refine", spy)
-    run = run_sequence(fixed_seq, "relnav", max_points=40, repeat_max_points=60, max_frames=5)
+    run = run_sequence(
+        fixed_seq, "relnav", **{"map.max_points": 40, "solver.repeat_max_points": 60}, max_frames=5
+    )
     assert sizes and max(sizes) == 60  # the full scan's subset, larger than the budgeted scan
     assert all(_repeated(run))

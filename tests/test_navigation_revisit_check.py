@@ -176,7 +176,7 @@ def _statuses(seq, **options) -> tuple[Navigator, list]:
 
 
 def test_navigator_flags_its_steps_while_the_revisit_alarm_stands(loop_seq):
-    opts = {"keyframe_every": 3, "loop_min_separation": 6}
+    opts = {"loops.keyframe_every": 3, "loops.min_separation": 6}
     nav, steps = _statuses(loop_seq, **opts)
     tested = [k for k, s in enumerate(steps) if "revisit_chi2" in s.result.info]
     assert tested, "the orbit's revisits were tested"
@@ -190,21 +190,21 @@ def test_navigator_flags_its_steps_while_the_revisit_alarm_stands(loop_seq):
     assert not any(s.result.message.startswith("map inconsistent") for s in steps)
     # the same run with a zero-size test (every supported revisit "fails"): the poses are the
     # same, and from the first such revisit on every ok step is flagged with the reason
-    _, alarmed = _statuses(loop_seq, revisit_alarm_chi2=1e-9, **opts)
+    _, alarmed = _statuses(loop_seq, **{"loops.revisit_alarm_chi2": 1e-9}, **opts)
     np.testing.assert_array_equal([s.pose for s in alarmed], [s.pose for s in steps])
     first = next(k for k, s in enumerate(alarmed) if s.result.info.get("revisit_alarm"))
     assert "map inconsistent" in alarmed[first].result.message
     assert first == tested[0]
     assert all(s.status != "ok" for s in alarmed[first:])
     # off: no test at all
-    _, off = _statuses(loop_seq, revisit_alarm_chi2=0, **opts)
+    _, off = _statuses(loop_seq, **{"loops.revisit_alarm_chi2": 0}, **opts)
     assert not any("revisit_chi2" in s.result.info for s in off)
     assert [s.status for s in off] == [s.status for s in steps]
 
 
 def test_negative_alarm_threshold_is_a_config_error():
     with pytest.raises(ConfigError, match="revisit_alarm_chi2"):
-        Navigator(revisit_alarm_chi2=-1.0)
+        Navigator(**{"loops.revisit_alarm_chi2": -1.0})
 
 
 def test_odometry_reports_the_revisit_alarm(loop_dir, tmp_path):
@@ -212,8 +212,8 @@ def test_odometry_reports_the_revisit_alarm(loop_dir, tmp_path):
 
     from relnav.cli.main import app
 
-    args = ["odometry", str(loop_dir), "--no-state", "-O", "keyframe_every=3"]
-    args += ["-O", "loop_min_separation=6"]
+    args = ["odometry", str(loop_dir), "--no-state", "-O", "loops.keyframe_every=3"]
+    args += ["-O", "loops.min_separation=6"]
     res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "ok")])
     assert res.exit_code == 0, res.output
     m = json.loads((tmp_path / "ok" / "metrics.json").read_text())
@@ -221,7 +221,7 @@ def test_odometry_reports_the_revisit_alarm(loop_dir, tmp_path):
     assert "map inconsistent" not in res.output
     # a zero-size test: every supported revisit fails, the run says so and flags the rest
     res = CliRunner().invoke(
-        app, [*args, "-O", "revisit_alarm_chi2=1e-9", "--out", str(tmp_path / "alarm")]
+        app, [*args, "-O", "loops.revisit_alarm_chi2=1e-9", "--out", str(tmp_path / "alarm")]
     )
     assert res.exit_code == 0, res.output
     m = json.loads((tmp_path / "alarm" / "metrics.json").read_text())

@@ -41,7 +41,9 @@ def _track(shape: Callable[[int, np.random.Generator], np.ndarray], **options) -
 
 
 def test_cylinder_about_its_axis_is_flagged_unstable():
-    steps = _track(_cylinder, stability_check=True, stability_pose="prediction")[1:]
+    steps = _track(
+        _cylinder, **{"integrity.stability_check": True, "integrity.stability_pose": "prediction"}
+    )[1:]
     assert all(s.status == "degenerate" for s in steps)
     assert all("unstable registration" in s.result.message for s in steps)
     assert min(s.result.info["stability_distance"] for s in steps) > 3.0
@@ -50,13 +52,15 @@ def test_cylinder_about_its_axis_is_flagged_unstable():
 
 
 def test_irregular_body_is_not_flagged():
-    steps = _track(_blob, stability_check=True)[1:]
+    steps = _track(_blob, **{"integrity.stability_check": True})[1:]
     assert all(s.status == "ok" for s in steps)
     assert max(s.result.info["stability_distance"] for s in steps) < 0.1
 
 
 def test_keep_fit_updates_the_pose_but_still_flags():
-    steps = _track(_cylinder, stability_check=True, stability_pose="fit")[1:]
+    steps = _track(
+        _cylinder, **{"integrity.stability_check": True, "integrity.stability_pose": "fit"}
+    )[1:]
     flagged = [s for s in steps if s.status == "degenerate"]
     assert flagged
     # unlike with the prediction kept, the filter takes the better-fitting answer
@@ -67,4 +71,4 @@ def test_off_by_default_and_options_checked():
     steps = _track(_cylinder)[1:]
     assert all("stability_distance" not in s.result.info for s in steps)
     with pytest.raises(ConfigError):
-        Navigator(stability_check=True, stability_gate=-1.0)
+        Navigator(**{"integrity.stability_check": True, "integrity.stability_gate": -1.0})

@@ -145,7 +145,12 @@ def test_navigator_hands_the_symmetric_rotation_to_the_motion_model():
     body = _capsule(2500, rng)
     body[:, 2] -= 1.0
     nav = Navigator(
-        symmetry_max_ratio=RATIO, symmetry_irls=IRLS, symmetry_every=1, bootstrap_frames=0
+        **{
+            "symmetry.max_ratio": RATIO,
+            "symmetry.irls": IRLS,
+            "symmetry.every": 1,
+            "startup.bootstrap_frames": 0,
+        }
     )
     seen = []
     for k in range(8):

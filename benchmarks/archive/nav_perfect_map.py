@@ -39,7 +39,8 @@ from relnav.geometry import invert, rotation_angle
 from relnav.geometry.rotations import hat
 from relnav.io.sequences import ScanSequence
 from relnav.navigation.gicp import left_information
-from relnav.navigation.navigator import Navigator, _rms_radius
+from relnav.navigation.navigator import Navigator
+from relnav.navigation.solver import rms_radius
 
 DEFAULT = [
     "capsule-ellipse-128",
@@ -73,7 +74,7 @@ def probe(
     degrees)."""
     seq = ScanSequence(seq_dir)
     gt = seq.gt_poses
-    nav = Navigator(initial_pose=gt[0], bootstrap_frames=0, **(options or {}))
+    nav = Navigator(initial_pose=gt[0], **{"startup.bootstrap_frames": 0, **(options or {})})
     nav.register_frame(seq[0])
     assert nav.map is not None
     for k in range(1, frames + 1):
@@ -87,10 +88,10 @@ def probe(
     for j in range(frames + 1, min(frames + 1 + n_probe, len(seq))):
         P = _finite(seq[j].points)
         rng = float(np.median(np.linalg.norm(P, axis=1)))
-        radius = max(_rms_radius(P), nav.spacing0)
+        radius = max(rms_radius(P), nav.spacing0)
         for start, T0 in zip(STARTS, (gt[j], gt[j - 1]), strict=True):
             Lam = left_information(T0, S_prior)
-            fit = nav._solve(P, T0, Lam, 3.0 * prior[0], rng, radius)
+            fit = nav.solver.solve(P, T0, Lam, 3.0 * prior[0], rng, radius)
             E = invert(gt[j]) @ fit["T"]
             out[start].append((np.linalg.norm(E[:3, 3]), math.degrees(rotation_angle(E[:3, :3]))))
             out[f"rms_{start}"].append(fit["rms"])

@@ -55,7 +55,7 @@ def profile(nav: Any, P: np.ndarray, result: Any) -> np.ndarray:
     from relnav.geometry.se3 import invert
 
     info = result.info
-    c = float(nav.config.kernel)
+    c = float(nav.config.solver.kernel)
     rng = float(np.median(np.linalg.norm(P, axis=1)))
     sc = np.array([1.0, 1.0, 1.0, rng, rng, rng])
     Hs = info["information"] / sc[:, None] / sc[None, :]
@@ -69,7 +69,7 @@ def profile(nav: Any, P: np.ndarray, result: Any) -> np.ndarray:
     cost = []
     for s in (0.0, *OFFSETS):
         T0 = exp_se3(u * s / sc) @ result.T_target_source
-        fit = nav.register_on_map(P, nav.map.information, T0, T0, hold, gate, rng)
+        fit = nav.solver.register_on_map(P, nav.map.information, T0, T0, hold, gate, rng)
         cost.append(robust_cost(fit.d2, c))
     return (np.asarray(cost[1:]) - cost[0]) / float(info["variance_factor"])
 

@@ -159,7 +159,7 @@ def probe(seq: Any, start: float, every: int, back: int, opts: dict) -> dict[str
     times = []
     for k in range(n0 + back, n, every):
         t = time.perf_counter()
-        fit, reason = nav.relocalizer.locate(seq[k].points, full[k - back])
+        fit, reason = nav.relocalizer.locate(seq[k].points, full[k - back], frame=nav.n_frames)
         times.append(time.perf_counter() - t)
         if fit is None:
             refused += 1
