@@ -118,7 +118,7 @@ def test_every_grid_gives_relnav_the_mission_input(group):
     relnav = [m for m in grid.methods if m.method == "relnav"]
     assert len(relnav) == 1 and relnav[0].name == "relnav"
     assert relnav[0].options.keys() == nav_suite.MISSION.keys()
-    assert nav_suite.MISSION["orbit_mean_motion"] == pytest.approx(2 * math.pi / 5553.6)
+    assert nav_suite.MISSION["orbit.mean_motion"] == pytest.approx(2 * math.pi / 5553.6)
     for key, value in nav_suite.MISSION.items():
         assert relnav[0].options[key] == pytest.approx(value, rel=1e-12)
 

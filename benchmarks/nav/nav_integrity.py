@@ -4,11 +4,11 @@ honest, and can a protection level separate wrong steps from right ones?
     python benchmarks/nav/nav_integrity.py --out bench/nav            # the suite's flash sequences
     python benchmarks/nav/nav_integrity.py --out bench/nav --holdout  # the held-out ones
 
-Runs ``relnav`` with ``alert_limit_t=0.5``, ``alert_limit_r_deg=5`` (the suite's definition of a
-wrong step) and prints per sequence: the mean and median NEES of the online steps against their
-step covariances (6 dof: 6 is consistent), the wrong steps of the evaluated (smoothed) trajectory
-and how many steps the protection level flagged among the wrong and the right ones. The ground
-truth is used for scoring only.
+Runs ``relnav`` with ``integrity.alert_limit_t=0.5``, ``integrity.alert_limit_r_deg=5`` (the suite's
+definition of a wrong step) and prints per sequence: the mean and median NEES of the online steps
+against their step covariances (6 dof: 6 is consistent), the wrong steps of the evaluated (smoothed)
+trajectory and how many steps the protection level flagged among the wrong and the right ones. The
+ground truth is used for scoring only.
 """
 
 from __future__ import annotations

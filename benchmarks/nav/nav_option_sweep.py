@@ -1,7 +1,7 @@
 """An option of relnav's navigator against its defaults, under neutral solver perturbations.
 
-    python benchmarks/nav/nav_option_sweep.py --out bench/nav -O surface=quadric
-    python benchmarks/nav/nav_option_sweep.py --out bench/nav -O surface=quadric --holdout \
+    python benchmarks/nav/nav_option_sweep.py --out bench/nav -O map.surface=quadric
+    python benchmarks/nav/nav_option_sweep.py --out bench/nav -O map.surface=quadric --holdout \
         --perturb 6
 
 On sparse scans one run of a sequence is one draw: neutral changes of the solver (``kernel``

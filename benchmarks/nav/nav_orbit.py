@@ -4,7 +4,7 @@
     python benchmarks/nav/nav_orbit.py --out bench/nav --holdout     # the held-out sequences
 
 Runs ``relnav`` on each sequence with the suite's mission input (the target's orbit,
-``nav_suite.MISSION``) and with ``orbit_mean_motion=0``, and prints the orbit test's figures
+``nav_suite.MISSION``) and with ``orbit.mean_motion=0``, and prints the orbit test's figures
 (:func:`relnav.navigation.orbit.correct_azimuth`): the map's symmetry ratio about its best
 axis, the orbit's misfit to the sensor's radius and height about that axis (m, and % of the
 sensor's median distance from the axis's centre), the excess (misfit of the orbit fitted to the
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print("|---|---|---|---|---|---|---|---|")
     for name in names:
-        off = _run(folders[name], {**extra, "orbit_mean_motion": 0.0})
+        off = _run(folders[name], {**extra, "orbit.mean_motion": 0.0})
         on = _run(folders[name], {**MISSION, **extra})
         o = on["orbit"] or {}
         ratio, misfit, excess, scale = (

@@ -5,7 +5,8 @@
         --methods relnav-tumbling,relnav,kiss-icp,small-gicp             # the default methods
     python benchmarks/nav/nav_phases.py --out bench/nav --state          # + the relative state
     python benchmarks/nav/nav_phases.py --out bench/nav --only voyager-tumble-64   # another one
-    python benchmarks/nav/nav_phases.py --out bench/nav --methods relnav-tumbling -O init_window=0
+    python benchmarks/nav/nav_phases.py --out bench/nav --methods relnav-tumbling \
+        -O startup.window=0
 
 The navigation suite's tumbling sequences (``benchmarks/nav/nav_suite.py``) each start their tumble
 at one attitude, so one run says little about where the sensor may meet the target. Here each

@@ -8,7 +8,7 @@
         -S preset=hold-point                                        # the tumbling presets
 
 Runs ``relnav`` (given the suite's mission input, the target's orbit ``nav_suite.MISSION``;
-``-O orbit_mean_motion=0`` runs without it) on the navigation suite's tumbling sequences
+``-O orbit.mean_motion=0`` runs without it) on the navigation suite's tumbling sequences
 (simulated once into ``OUT/sequences`` by ``benchmarks/nav/nav_suite.py``'s definitions), feeds its
 poses to paper 2's twistor UKF (:func:`relnav.navigation.state.relative_state`) and prints, after
 the first 30 % of the frames (convergence): the angular-rate error (median, 95th percentile,

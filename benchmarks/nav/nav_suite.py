@@ -19,7 +19,7 @@ sequence's whole-run time), runs every method on the same frames, and prints APE
 wrong-step counts (> 0.5 m or > 5°), flagged steps and ms per frame, then each method's ratio to
 the best peer. ``--json`` writes everything. ``relnav`` is given the target's orbit (its mean
 motion, :data:`relnav.bench.nav_suite.MISSION`: every sequence is flown about a target in the
-same low Earth orbit), as a mission would give it; ``-O orbit_mean_motion=0`` runs it without.
+same low Earth orbit), as a mission would give it; ``-O orbit.mean_motion=0`` runs it without.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Which direction is off on relnav's wrong steps, and how stable are the figures?
 
     python benchmarks/nav/nav_weak_directions.py --out bench/nav
-    python benchmarks/nav/nav_weak_directions.py --out bench/nav -O nonplanar_gain=100 --perturb 12
+    python benchmarks/nav/nav_weak_directions.py --out bench/nav -O map.nonplanar_gain=100 \
+        --perturb 12
 
 For each sequence (default the two with wrong steps on the suite's flash sequences,
 iridium-helical-64 and orion-inclined-64) runs ``relnav`` and, for every wrong step of the

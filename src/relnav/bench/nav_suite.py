@@ -63,9 +63,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 LEO_PERIOD_S = 5553.6
-MISSION: dict[str, Any] = {"orbit_mean_motion": 2 * math.pi / LEO_PERIOD_S}
+MISSION: dict[str, Any] = {"orbit.mean_motion": 2 * math.pi / LEO_PERIOD_S}
 """relnav's mission input on every sequence (suite and held out): the target's orbit, one low
-Earth orbit of ``LEO_PERIOD_S`` (``-O orbit_mean_motion=0`` runs without it). Not a tuning; the
+Earth orbit of ``LEO_PERIOD_S`` (``-O orbit.mean_motion=0`` runs without it). Not a tuning; the
 grids give ``relnav`` the same value."""
 
 PEERS = [

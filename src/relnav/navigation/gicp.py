@@ -404,7 +404,7 @@ def solve_scan_to_map(
         Scan points, sensor frame, m.
     target : relnav.navigation.voxel_map.VoxelMap
         The map: its points (m, target frame), search trees, per-point information (1/m²) and,
-        with ``surface="quadric"``, its curved patches
+        with ``map.surface="quadric"``, its curved patches
         (:attr:`~relnav.navigation.voxel_map.VoxelMap.surface`; otherwise the plane through
         each map point).
     T0, T_pred : (4, 4) float64

@@ -31,7 +31,7 @@ Per frame ``k``:
    (``smooth_lag``) gives :meth:`Navigator.finalize` its trajectory.
 
 Parameters are scale-free (multiples of the first scan's point spacing ``s₀``) and were chosen
-on the navigation suite (``benchmarks/nav_suite.py``), then frozen.
+on the navigation suite (``benchmarks/nav/nav_suite.py``), then frozen.
 """
 
 from __future__ import annotations

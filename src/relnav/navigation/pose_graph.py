@@ -29,7 +29,7 @@ Conventions: an edge ``(i, j, Z, Ω)`` measures ``Z ≈ X_i⁻¹ X_j`` with a ri
 :func:`scipy.optimize.least_squares` was not used because its robust loss acts on each residual
 component, not on an edge's χ², which is what a loop edge is accepted or rejected by.
 
-**[measured]** (navigation suite, ``benchmarks/nav_suite.py --methods relnav -O
+**[measured]** (navigation suite, ``benchmarks/nav/nav_suite.py --methods relnav -O
 loop_closure=true``; APE m without → with): eros-ellipse-64 0.592 → 0.319, voyager-ellipse-128
 2.072 → 0.862, aura-ellipse-64 0.400 → 1.007, envisat-tumble-64 0.809 → 0.853;
 orion-inclined-64 (8.09) and the helical approaches have no revisit (unchanged); RPE equal or

@@ -14,7 +14,7 @@ registration before it is believed:
    (:func:`relnav.matching.nn.match_descriptors`).
 3. **Select** a geometrically consistent set of matches (pairwise distances preserved within
    ``ε = reloc_epsilon`` × ``s₀``): the exact maximum clique of the consistency graph
-   (``reloc_method="clique"``, :func:`max_clique`) or paper 1's geometric consistency grouping
+   (``reloc.method="clique"``, :func:`max_clique`) or paper 1's geometric consistency grouping
    (``"gcc"``, every seed). The ``reloc_candidates`` largest disjoint sets each give a candidate
    pose by Kabsch.
 4. **Verify** each candidate with the navigator's own robust registration, started at the
@@ -46,7 +46,7 @@ message; :class:`~relnav.navigation.navigator.Navigator` resets its motion filte
 (``reloc_velocity``), then updates it at the verified pose and inserts the scan into the map.
 ``timings["relocalise"]`` holds each attempt's time. On the navigation suite's 17 unmodified
 sequences and the 4 held-out ones the relocaliser never triggers (same poses with it on and
-off; ``benchmarks/nav_relocalize.py --unmodified``).
+off; ``benchmarks/nav/nav_relocalize.py --unmodified``).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ Per frame (:class:`RepeatedPoints`, option ``repeat_refine`` of the navigator):
 4. **Cost**: a second solve on frames whose rays do not repeat; after ``PATIENCE`` tested frames
    in a row without repetition, the test runs on every ``RETEST``-th frame only.
 
-**[measured]** Suite APE (m), ``repeat_refine`` 0 → 0.1 (``python benchmarks/nav_suite.py --out
+**[measured]** Suite APE (m), ``repeat_refine`` 0 → 0.1 (``python benchmarks/nav/nav_suite.py --out
 bench/nav --methods relnav``): sim-eoi 0.053 → 0.014, sim-helical 0.085 → 0.030, sim-voyager
 0.048 → 0.036, sim-orion 0.542 → 0.076, sim-bennu 0.817 → 0.141; the other 12 sequences are
 unchanged to the last digit (the flash sequences never try it, the ``-resample`` presets never

@@ -8,7 +8,7 @@ density-capped accumulation of all accepted scans: much denser than one sparse s
 Each map point carries a plane-like information matrix (:func:`plane_information`) from its
 ``k`` nearest map neighbours: strong along the local normal, weak along the surface, so that a scan
 point is pulled onto the surface, not onto the sample positions of earlier scans. With
-``surface="quadric"`` each point also carries the second-order surface of its neighbours
+``map.surface="quadric"`` each point also carries the second-order surface of its neighbours
 (:func:`quadric_surface`, :attr:`VoxelMap.surface`), from which the registration measures a scan
 point's offset instead of from the plane (:func:`relnav.navigation.gicp.solve_scan_to_map`).
 

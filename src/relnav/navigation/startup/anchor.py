@@ -1,16 +1,15 @@
 """Re-anchoring the navigator's start-up (``reanchor_frame``): the first scan on the later map.
 
-**[interpretation, measured]** On a sparse flash scan the first steps are registered onto a map
-of one to a few scans, and such a registration is wrong by degrees even when started at the true
-pose: on the navigator's own solver, a voyager-tumble-64 scan registered onto a map of 1, 2, 4
-and 11 scans placed at their *true* poses ends 4.7°, 4.0°, 0.7° and 0.6° from the truth
-(iridium-tumble-64: 10.2°, 10.2°, 6.1°, 0.6°;
-``benchmarks/nav_perfect_map.py``). Consecutive sparse scans also agree best when their sample
-positions coincide, which favours a slower motion: the joint cost of the first ten frames is
-*lower* at an under-rotated constant-velocity solution than at the true poses (voyager-tumble-64:
-134 against 291). Tracking therefore turns the whole map by the start-up's error, 5–15° on the
-tumbling sequences, and keeps it: the map is self-consistent in a turned target frame (a gauge
-error), which no later registration sees.
+**[interpretation, measured]** On a sparse flash scan the first steps are registered onto a map of
+one to a few scans, and such a registration is wrong by degrees even when started at the true pose:
+on the navigator's own solver, a voyager-tumble-64 scan registered onto a map of 1, 2, 4 and 11
+scans placed at their *true* poses ends 4.7°, 4.0°, 0.7° and 0.6° from the truth (iridium-tumble-64:
+10.2°, 10.2°, 6.1°, 0.6°; ``benchmarks/archive/nav_perfect_map.py``). Consecutive sparse scans also
+agree best when their sample positions coincide, which favours a slower motion: the joint cost of
+the first ten frames is *lower* at an under-rotated constant-velocity solution than at the true
+poses (voyager-tumble-64: 134 against 291). Tracking therefore turns the whole map by the start-up's
+error, 5–15° on the tumbling sequences, and keeps it: the map is self-consistent in a turned target
+frame (a gauge error), which no later registration sees.
 
 Once ``reanchor_frame`` frames are tracked, the map of the frames from ``reanchor_skip`` on
 (dense, away from the first scan's sample positions) is where the first scan is registered again,

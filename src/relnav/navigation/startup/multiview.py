@@ -7,7 +7,7 @@ velocity is not known yet, and such a step is weak in the target's aspect (a rot
 target against a lateral translation). Once ``init_window`` frames are tracked, their poses
 (the first one fixed: the anchor) are refined from all of them at once, the map is rebuilt from
 the refined poses and the motion filter goes on from the refined last pose, with its own
-velocity (``init_velocity="keep"``) or the refined last steps' (``"refined"``)
+velocity (``startup.velocity="keep"``) or the refined last steps' (``"refined"``)
 (:func:`refine_window`). Two solvers:
 
 * ``joint`` (default): Levenberg–Marquardt over all the window's poses; every map point paired
@@ -18,43 +18,41 @@ velocity (``init_velocity="keep"``) or the refined last steps' (``"refined"``)
 * ``loo``: each frame in turn registered onto the voxel map of the others (leave-one-out,
   Gauss–Seidel sweeps) with the navigator's own solver.
 
-**[measured]** The default is ``init_window=10`` with ``init_velocity="keep"`` (the filter
-keeps its own velocity; the window's poses and the map are replaced). Off → on,
-``python benchmarks/nav_suite.py --out OUT --methods relnav [-O init_window=0]`` (APE m, wrong
-steps): eros-ellipse-64 0.59 → 0.42, voyager-ellipse-128 2.07 → 1.21, asteroid-helical-128 0.81
-→ 0.16, sim-helical-resample 0.343 → 0.254, sim-voyager-resample 0.111 → 0.091,
-sim-bennu-resample 9.99 / 6 → 1.32 / 0, orion-inclined-64 8.09 / 14 → 8.03 / 7,
-sim-orion-resample 31.9 / 33 → 31.1 / 32; worse on aura-ellipse-64 0.40 → 0.57; refused by the
-check and unchanged on the other 8 (envisat-tumble-64, iridium-helical-64 and the dense presets).
-Held out (never used to choose): comet-ellipse-64 0.47 → 0.13, capsule-ellipse-128 52.4 → 51.9,
-voyager-helical-64 and aura-tumble-64 refused. Under 6 neutral perturbations of the solver
-(``benchmarks/nav_weak_directions.py --perturb 6``) the medians go eros 0.58 → 0.46,
-voyager-ellipse-128 2.08 → 1.19, asteroid-helical-128 0.81 → 0.18, aura-ellipse-64 0.44 → 0.57;
-under 12, orion-inclined-64 7.35 m / 11 wrong → 7.11 / 13 (chaotic either way) and
-iridium-helical-64 17.5 → 17.2 m. Over windows of 6, 8, 10, 12 and 15 frames no sequence is
-lost as with the former setting below (sim-bennu-resample 2.06 / 7.18 / 1.32 / 2.03 / 0.99 m,
-sim-helical-resample 0.25–0.30 m, asteroid-helical-128 0.13–0.54 m; orion-inclined-64 2.9 /
-13.3 / 8.0 / 6.8 / 9.6 m, chaotic as without; with 12 frames iridium-helical-64 8.1 m but 30
-wrong steps).
-With ``init_velocity="refined"`` (the filter restarting from the mean of the refined last
-steps, the former setting) the dense presets break for some windows: 8 frames lose sim-orion
-(0.08 → 73.7 m: the restarted velocity is 40 χ² off the filter's, the next step is
-inconsistent with it, the re-registration under the weak prior is accepted and the widened
-filter lets the capsule slide 11.5 m), 12 frames sim-eoi (0.008 → 2.3 m, velocity 302 χ² off);
-the refinement's own pose corrections are 20–5 000 χ² of the filter's covariance on the runs it
-helps too, so no consistency gate tells the cases apart. Without the check, envisat-tumble-64
-is worse on 17 of 20 noise seeds (median APE 1.44 → 3.08 m): started at the true poses the
-refinement drifts 0.27° per frame away from them (its 50-point scans of a box themselves favour
-a slower rotation, which constant-velocity terms cannot see); with the check all 20 are refused.
-The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6 m).
-Cost: one refinement (or refused attempt) of 0.03–0.20 s at 64×64 and 128×128, 0.05–0.15 s on
+**[measured]** The default is ``startup.window=10`` with ``startup.velocity="keep"`` (the filter
+keeps its own velocity; the window's poses and the map are replaced). Off → on, ``python
+benchmarks/nav/nav_suite.py --out OUT --methods relnav [-O startup.window=0]`` (APE m, wrong steps):
+eros-ellipse-64 0.59 → 0.42, voyager-ellipse-128 2.07 → 1.21, asteroid-helical-128 0.81 → 0.16,
+sim-helical-resample 0.343 → 0.254, sim-voyager-resample 0.111 → 0.091, sim-bennu-resample 9.99 / 6
+→ 1.32 / 0, orion-inclined-64 8.09 / 14 → 8.03 / 7, sim-orion-resample 31.9 / 33 → 31.1 / 32; worse
+on aura-ellipse-64 0.40 → 0.57; refused by the check and unchanged on the other 8
+(envisat-tumble-64, iridium-helical-64 and the dense presets). Held out (never used to choose):
+comet-ellipse-64 0.47 → 0.13, capsule-ellipse-128 52.4 → 51.9, voyager-helical-64 and aura-tumble-64
+refused. Under 6 neutral perturbations of the solver (``benchmarks/nav/nav_weak_directions.py
+--perturb 6``) the medians go eros 0.58 → 0.46, voyager-ellipse-128 2.08 → 1.19,
+asteroid-helical-128 0.81 → 0.18, aura-ellipse-64 0.44 → 0.57; under 12, orion-inclined-64 7.35 m /
+11 wrong → 7.11 / 13 (chaotic either way) and iridium-helical-64 17.5 → 17.2 m. Over windows of 6,
+8, 10, 12 and 15 frames no sequence is lost as with the former setting below (sim-bennu-resample
+2.06 / 7.18 / 1.32 / 2.03 / 0.99 m, sim-helical-resample 0.25–0.30 m, asteroid-helical-128 0.13–0.54
+m; orion-inclined-64 2.9 / 13.3 / 8.0 / 6.8 / 9.6 m, chaotic as without; with 12 frames
+iridium-helical-64 8.1 m but 30 wrong steps). With ``startup.velocity="refined"`` (the filter
+restarting from the mean of the refined last steps, the former setting) the dense presets break for
+some windows: 8 frames lose sim-orion (0.08 → 73.7 m: the restarted velocity is 40 χ² off the
+filter's, the next step is inconsistent with it, the re-registration under the weak prior is
+accepted and the widened filter lets the capsule slide 11.5 m), 12 frames sim-eoi (0.008 → 2.3 m,
+velocity 302 χ² off); the refinement's own pose corrections are 20–5 000 χ² of the filter's
+covariance on the runs it helps too, so no consistency gate tells the cases apart. Without the
+check, envisat-tumble-64 is worse on 17 of 20 noise seeds (median APE 1.44 → 3.08 m): started at the
+true poses the refinement drifts 0.27° per frame away from them (its 50-point scans of a box
+themselves favour a slower rotation, which constant-velocity terms cannot see); with the check all
+20 are refused. The ``loo`` solver converges slowly and was worse (iridium-helical-64 13.5 → 54.6
+m). Cost: one refinement (or refused attempt) of 0.03–0.20 s at 64×64 and 128×128, 0.05–0.15 s on
 the presets and 0.40 s on sim-eoi's 4 000-point scans, all in the window's last frame (the pair
-system in numba and closed form, :func:`_pair_system`; the pairs found among the plane
-neighbours, :func:`_window_pairs`, and reused while the graduated kernel shrinks: the same poses
-as the first version's 0.3–3.6 s): the median time per frame is unchanged, the mean over a run
-is 1.6–2.5 ms on the flash sequences (8.1 ms on asteroid-helical-128) and 3.4–6.4 ms on the
-60-frame presets (34 ms on sim-eoi); over a whole run 1.0–2.2× KISS-ICP's time on the flash
-sequences, up to 2.9× on the presets (``nav_suite.py``'s second time ratio).
+system in numba and closed form, :func:`_pair_system`; the pairs found among the plane neighbours,
+:func:`_window_pairs`, and reused while the graduated kernel shrinks: the same poses as the first
+version's 0.3–3.6 s): the median time per frame is unchanged, the mean over a run is 1.6–2.5 ms on
+the flash sequences (8.1 ms on asteroid-helical-128) and 3.4–6.4 ms on the 60-frame presets (34 ms
+on sim-eoi); over a whole run 1.0–2.2× KISS-ICP's time on the flash sequences, up to 2.9× on the
+presets (``nav_suite.py``'s second time ratio).
 """
 
 from __future__ import annotations
@@ -527,7 +525,7 @@ def refine_window(
     few pairs or too little overlap keeps its pose. Frames not in the map follow the
     correction of the last accepted frame before them. Then the map is rebuilt from the
     refined poses, the filter's pose is the refined one and its velocity its own
-    (``init_velocity="keep"``) or the mean of the refined last steps (``"refined"``: half of the
+    (``startup.velocity="keep"``) or the mean of the refined last steps (``"refined"``: half of the
     window's steps, at least two), and the smoother
     restarts at the last frame: :meth:`Navigator.finalize` returns the refined poses for the window
     (:meth:`relnav.navigation.startup.StartupWindow.observe` makes the correction).

@@ -237,7 +237,7 @@ def adopt_window(
     :func:`~.multiview.refine_window` or :func:`~.anchor.reanchor`): frames outside the map
     follow the last accepted frame's change; the map is to be rebuilt from the new poses, the
     filter to go on from the last one (its velocity its own, or with
-    ``init_velocity="refined"`` the mean of the refined last steps) and the smoother to restart
+    ``startup.velocity="refined"`` the mean of the refined last steps) and the smoother to restart
     at the last frame; :meth:`~relnav.navigation.navigator.Navigator.finalize` returns the new
     poses for the window's other frames. ``before``: the poses before the change; ``motion``
     is read, not written. Returns the correction, and the largest rotation of a pose (deg) and
