@@ -224,8 +224,8 @@ def _two_nearest(
     st_lb: np.ndarray,
 ) -> tuple[float, int, float]:  # pragma: no cover - numba
     """The two nearest points of ``q`` strictly closer than ``√bound`` in a tree of
-    :func:`relnav.geometry.kdtree._kd_build`: ``(dd1, k1, dd2)``, squared distances summed as
-    :func:`relnav.geometry.kdtree._kd_query` sums them and the permuted index of the nearest
+    :func:`relnav.geometry.kdtree.kd_build`: ``(dd1, k1, dd2)``, squared distances summed as
+    :func:`relnav.geometry.kdtree.kd_query` sums them and the permuted index of the nearest
     (``bound`` and ``-1`` when not found). ``st_*``: the search stack (128 entries)."""
     b1, b2, k1 = bound, bound, -1
     n_nodes = split_dim.shape[0]
