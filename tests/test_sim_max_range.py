@@ -92,9 +92,14 @@ def test_scenario_out_of_range_is_one_error_line(tmp_path) -> None:  # type: ign
 
 
 def test_config_list_names_each_presets_sensor_range() -> None:
-    r = CliRunner().invoke(app, ["config", "list"], env={"COLUMNS": "240"})
+    from relnav.cli.config_cmd import preset_sensor_ranges
+
+    assert preset_sensor_ranges("sim-voyager") == "lidar: surface-hpr, 3000 m range"
+    assert preset_sensor_ranges("real-fb") == "vlp16: vlp16, 100 m range"
+    assert preset_sensor_ranges("li-rotating") == (
+        "kinect: kinect1, 6 m depth; lidar: hdl64, 120 m range"
+    )
+    r = CliRunner().invoke(app, ["config", "list"])
     assert r.exit_code == 0, r.output
-    rows = {line.split("│")[1].strip(): line for line in r.output.splitlines() if "│" in line}
-    assert "surface-hpr, 3000 m range" in rows["sim-voyager"]
-    assert "vlp16, 100 m range" in rows["real-fb"]
-    assert "kinect1, 6 m depth" in rows["li-rotating"] and "hdl64, 120 m" in rows["li-rotating"]
+    assert "max range" in r.output and "sensors.0.overrides.max_range" in " ".join(r.output.split())
+    assert "surface-hpr" in r.output and "3000" in r.output  # the cells, however wrapped

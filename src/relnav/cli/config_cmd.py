@@ -60,13 +60,26 @@ def dump(
     typer.echo(text, nl=False)
 
 
+def preset_sensor_ranges(name: str) -> str:
+    """``"label: sensor preset, R m range"`` of each sensor of scenario preset ``name`` (a
+    depth camera's limit is a depth along its boresight), ``"; "``-joined."""
+    from relnav.sim.presets import get_preset
+    from relnav.sim.sensors import make_sensor
+
+    out = []
+    for s in get_preset(name).sensors:
+        d = make_sensor(s.preset, **{k: v for k, v in s.overrides.items() if k != "name"})
+        what = "depth" if d.kind == "depth_camera" else "range"
+        out.append(f"{s.label}: {s.preset}, {d.to_dict()['max_range']:g} m {what}")
+    return "; ".join(out)
+
+
 @config_app.command("list")
 def list_presets() -> None:
     """List the scenario presets with their options, sensors (maximum range) and descriptions."""
     from rich.table import Table
 
     from relnav.sim.presets import available_presets, get_preset, preset_options
-    from relnav.sim.sensors import make_sensor
 
     table = Table(title="scenario presets (relnav simulate NAME --out DIR)")
     table.add_column("preset")
@@ -76,16 +89,11 @@ def list_presets() -> None:
     table.add_column("description")
     for name in available_presets():
         sc = get_preset(name)
-        sensors = []
-        for s in sc.sensors:
-            d = make_sensor(s.preset, **{k: v for k, v in s.overrides.items() if k != "name"})
-            what = "depth" if d.kind == "depth_camera" else "range"
-            sensors.append(f"{s.label}: {s.preset}, {d.to_dict()['max_range']:g} m {what}")
         table.add_row(
             name,
             str(sc.frames),
             ", ".join(preset_options(name)),
-            "; ".join(sensors),
+            preset_sensor_ranges(name),
             sc.description,
         )
     console.print(table)
