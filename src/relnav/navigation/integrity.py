@@ -62,7 +62,8 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
 
 def disagreement(result: RegistrationResult, c: NavigatorConfig) -> str:
     """Why an accepted step's motion model and scan disagree beyond what its covariance can
-    say (``flag_chi2``, ``flag_min_fitness``, ``flag_recovered``), or ``""``."""
+    say (``integrity.flag_chi2``, ``integrity.flag_min_fitness``,
+    ``integrity.flag_recovered``), or ``""``."""
     info, ig = result.info, c.integrity
     chi2 = float(info.get("chi2_motion", 0.0))
     if ig.flag_recovered and info.get("recovered"):

@@ -12,23 +12,23 @@ Per frame ``k``:
 1. **Predict** with the constant-velocity error-state filter of pose and body velocity
    (:class:`~relnav.navigation.motion.ConstantVelocityFilter`); its pose covariance ``P_pp``
    is the prior's. Before the first velocity is known, the prior is weak
-   (``sigma_first_t``, ``sigma_first_r_deg``).
+   (``prior.sigma_first_t``, ``prior.sigma_first_r_deg``).
 2. **Register** the scan onto the map from the prediction, the prediction's information inside
    the least squares: directions the scan cannot fix (a symmetric target about its axis, one
    flat panel) stay with the model instead of drifting. When the scan's points repeat the
    previous scan's surface points (not merely its rays), the answer is refined point to point
-   (``repeat_refine``).
+   (``solver.repeat_refine``).
 3. **Judge** the step from evidence only: too few scan points near the model, an overlap below
-   ``min_overlap``, a degenerate scan information (``min_degeneracy``), or a correction
-   inconsistent with the motion model (χ² beyond ``chi2_gate``) unless a second registration
-   under the weak prior fits the scan as well (``recover_rms_ratio``; then the filter is
-   widened) → ``failed``/``degenerate``: the pose keeps the prediction and the map is not
+   ``solver.min_overlap``, a degenerate scan information (``solver.min_degeneracy``), or a
+   correction inconsistent with the motion model (χ² beyond ``solver.chi2_gate``) unless a second
+   registration under the weak prior fits the scan as well (``solver.recover_rms_ratio``; then the
+   filter is widened) → ``failed``/``degenerate``: the pose keeps the prediction and the map is not
    updated. An accepted step whose covariance gives it a probability above
-   ``flag_probability`` of an error beyond ``flag_limit_t`` / ``flag_limit_r_deg`` is
-   ``flagged``: a label only, the step is used as an ``ok`` one.
+   ``integrity.flag_probability`` of an error beyond ``integrity.flag_limit_t`` /
+   ``integrity.flag_limit_r_deg`` is ``flagged``: a label only, the step is used as an ``ok`` one.
 4. **Update** the filter with the registered pose and the scan's own information (scaled by
    the observed residual) and the map with the scan; the fixed-lag smoother
-   (``smooth_lag``) gives :meth:`Navigator.finalize` its trajectory.
+   (``prior.smooth_lag``) gives :meth:`Navigator.finalize` its trajectory.
 
 Parameters are scale-free (multiples of the first scan's point spacing ``s₀``) and were chosen
 on the navigation suite (``benchmarks/nav/nav_suite.py``), then frozen.
@@ -90,7 +90,9 @@ class Navigator:
     attitude : AttitudeInput, optional
         The chaser's measured attitude: the rotation of each step's prior (:mod:`.attitude_input`).
     **options
-        Fields of :class:`NavigatorConfig`.
+        Options of :class:`NavigatorConfig`: ``section={"key": value}``, ``**{"section.key":
+        value}``, or a flat name of the last release (deprecated;
+        :func:`~relnav.navigation.options.navigator_config`).
     """
 
     name = "relnav"
@@ -128,7 +130,7 @@ class Navigator:
         self._prefix: list[np.ndarray] = []  # the start-up window's corrected earlier poses
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
-        self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit_mean_motion
+        self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit.mean_motion
 
     @property
     def map(self) -> VoxelMap | None:
@@ -170,11 +172,11 @@ class Navigator:
     def _bootstrap(self, last: OdometryStep) -> OdometryStep:
         """Track the buffered first frames again, starting with the velocity they revealed.
 
-        **[interpretation]** The first step has no motion prior: on sparse or near-symmetric
-        scans it can settle short of the true motion, and the map and the velocity inherit the
-        error. After ``bootstrap_frames`` frames the filter knows the velocity; the navigator is
-        reset to the first frame and the same scans are tracked again from that velocity (with
-        its covariance, inflated 4×), once. The online steps already returned are not changed;
+        **[interpretation]** The first step has no motion prior: on sparse or near-symmetric scans
+        it can settle short of the true motion, and the map and the velocity inherit the error.
+        After ``startup.bootstrap_frames`` frames the filter knows the velocity; the navigator is
+        reset to the first frame and the same scans are tracked again from that velocity (with its
+        covariance, inflated 4×), once. The online steps already returned are not changed;
         :meth:`finalize` returns the second pass's poses.
         """
         assert self.motion is not None and self._boot is not None
@@ -326,7 +328,7 @@ class Navigator:
     def _reset_for_relocalisation(self) -> None:
         """Reset the motion filter before it takes a relocalised pose: the pose's covariance
         is widened by the first frame's (the filter then takes the verified pose as it is) and
-        the velocity's as ``reloc_velocity`` says: ``keep`` (kept, 1σ widened by 10 × the white
+        the velocity's as ``reloc.velocity`` says: ``keep`` (kept, 1σ widened by 10 × the white
         acceleration), ``zero`` (restarted: zero, the first frame's 1σ) or ``widen`` (kept,
         the first frame's 1σ, as a recovered step)."""
         c, m = self.config, self.motion
@@ -338,8 +340,8 @@ class Navigator:
         m.reset(velocity=zero, widen=first, widen_velocity=sv)
 
     def _update_symmetry(self) -> None:
-        """Test the map for an axis of rotational symmetry every ``symmetry_every`` accepted
-        frames (``symmetry_max_ratio > 0``; :mod:`relnav.navigation.symmetry`)."""
+        """Test the map for an axis of rotational symmetry every ``symmetry.every`` accepted
+        frames (``symmetry.max_ratio > 0``; :mod:`relnav.navigation.symmetry`)."""
         c = self.config
         if c.symmetry.max_ratio <= 0 or self.map is None:
             return
@@ -368,9 +370,9 @@ class Navigator:
     def _judge_integrity(self, result: RegistrationResult, C: np.ndarray) -> None:
         """Record the step's 1σ (largest translation/rotation axis of its covariance ``C``,
         body frame); an ``ok`` step whose protection level exceeds an alert limit becomes
-        ``degenerate``, one whose probability of an error beyond ``flag_limit_t`` /
-        ``flag_limit_r_deg`` exceeds ``flag_probability`` becomes ``flagged`` (the status
-        only: the pose, the filter and the map were updated as for an ``ok`` step)."""
+        ``degenerate``, one whose probability of an error beyond ``integrity.flag_limit_t`` /
+        ``integrity.flag_limit_r_deg`` exceeds ``integrity.flag_probability`` becomes ``flagged``
+        (the status only: the pose, the filter and the map were updated as for an ``ok`` step)."""
         c = self.config
         s_t = math.sqrt(max(float(np.linalg.eigvalsh(C[:3, :3])[-1]), 0.0))
         s_r = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(C[3:, 3:])[-1]), 0.0)))
@@ -403,8 +405,9 @@ class Navigator:
             result.status, result.message = "flagged", why
 
     def _settled(self) -> bool:
-        """Whether the motion model has seen ``flag_after_frames`` frames of the map: before,
-        its corrections are it learning the velocity (no jitter learned, no disagreement flag)."""
+        """Whether the motion model has seen ``integrity.flag_after_frames`` frames of the map:
+        before, its corrections are it learning the velocity (no jitter learned, no disagreement
+        flag)."""
         return self.n_frames - self._f0 >= self.config.integrity.flag_after_frames
 
     def skip_frame(self, reason: str) -> OdometryStep:
@@ -441,8 +444,8 @@ class Navigator:
         return self._observe_loops(None, out)
 
     def _observe_loops(self, P: np.ndarray | None, out: OdometryStep) -> OdometryStep:
-        """Record the frame for the pose graph (``loop_closure``) and the revisit test
-        (``revisit_alarm_chi2``): its scan and its step's covariance; while the revisit alarm
+        """Record the frame for the pose graph (``loops.enabled``) and the revisit test
+        (``loops.revisit_alarm_chi2``): its scan and its step's covariance; while the revisit alarm
         stands an ``ok`` step is ``flagged``. The time it takes is added to the frame's."""
         c = self.config
         if not (c.loops.enabled or c.loops.revisit_alarm_chi2 > 0) or self.map is None:
@@ -649,11 +652,11 @@ class Navigator:
         return solver.fit_result(fit, T, H, Lam, status, message, timings, info)
 
     def finalize(self) -> np.ndarray:
-        """Poses of every frame so far, smoothed when ``smooth_lag > 0``: ``(N, 4, 4)``.
+        """Poses of every frame so far, smoothed when ``prior.smooth_lag > 0``: ``(N, 4, 4)``.
 
         Frames before the map started keep their pose; each later frame's pose is the
-        fixed-lag smoother's (it used up to ``smooth_lag`` later frames), then, with
-        ``loop_closure``, corrected by the keyframes' pose graph
+        fixed-lag smoother's (it used up to ``prior.smooth_lag`` later frames), then, with
+        ``loops.enabled``, corrected by the keyframes' pose graph
         (:meth:`relnav.navigation.pose_graph.LoopCloser.correct`).
         """
         online = list(self._online)
@@ -680,7 +683,7 @@ class Navigator:
 
     def final_report(self) -> dict[str, Any]:
         """What the navigator decided once per run, for the run's record (``run.json``): the
-        orbit test's verdict when ``orbit_mean_motion`` was given (:class:`OrbitCorrection`),
+        orbit test's verdict when ``orbit.mean_motion`` was given (:class:`OrbitCorrection`),
         the start-up's multi-view refinements and re-anchoring (accepted or not, why) and the
         revisits tested (:meth:`RevisitCheck.summary`)."""
         out: dict[str, Any] = {}
@@ -696,7 +699,7 @@ class Navigator:
 
     def _orbit_azimuth(self, poses: np.ndarray) -> np.ndarray:
         """The azimuth about a body of revolution's axis from the target's free relative orbit
-        (``orbit_mean_motion``; :mod:`relnav.navigation.orbit`), recorded in :attr:`orbit`."""
+        (``orbit.mean_motion``; :mod:`relnav.navigation.orbit`), recorded in :attr:`orbit`."""
         c = self.config
         assert self.map is not None
         try:

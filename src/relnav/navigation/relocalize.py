@@ -6,44 +6,44 @@ with paper 1's descriptor pipeline, and the answer is checked by the navigator's
 registration before it is believed:
 
 1. **Describe** the map (voxel means, target frame; voxelised at the first scan's spacing
-   ``s₀`` and capped at ``reloc_max_map_points`` keypoints, the whole downsampled map kept as
+   ``s₀`` and capped at ``reloc.max_map_points`` keypoints, the whole downsampled map kept as
    support) and the scan (sensor frame) with the same descriptor and the same support radius in
-   metres (``reloc_radius`` × ``s₀``). The map's description is cached until the map changes
+   metres (``reloc.radius`` × ``s₀``). The map's description is cached until the map changes
    (it does not while the navigator is lost).
 2. **Match** every scan descriptor to its nearest map descriptor with paper 1's gate ``τ``
    (:func:`relnav.matching.nn.match_descriptors`).
 3. **Select** a geometrically consistent set of matches (pairwise distances preserved within
    ``ε = reloc_epsilon`` × ``s₀``): the exact maximum clique of the consistency graph
    (``reloc.method="clique"``, :func:`max_clique`) or paper 1's geometric consistency grouping
-   (``"gcc"``, every seed). The ``reloc_candidates`` largest disjoint sets each give a candidate
+   (``"gcc"``, every seed). The ``reloc.candidates`` largest disjoint sets each give a candidate
    pose by Kabsch.
 4. **Verify** each candidate with the navigator's own robust registration, started at the
-   candidate under the first frame's weak prior with a tight gate (``reloc_gate`` × ``s₀``). A
-   candidate is accepted only if its overlap is at least ``min_overlap``, its robust RMS is at
-   most ``reloc_rms_ratio`` × the median RMS of the recent ``ok`` steps, its information is not
-   degenerate, and it fits the scan better than the prediction does (more scan points within
-   3σ of the model, registered the same way from the prediction). The best accepted candidate
-   wins unless the scan is **ambiguous** on the map (:meth:`Relocalizer._ambiguous`: quarter
-   and half turns of it converge to another pose that fits as well; a near-symmetric target).
+   candidate under the first frame's weak prior with a tight gate (``reloc.gate`` × ``s₀``). A
+   candidate is accepted only if its overlap is at least ``solver.min_overlap``, its robust RMS is
+   at most ``reloc.rms_ratio`` × the median RMS of the recent ``ok`` steps, its information is not
+   degenerate, and it fits the scan better than the prediction does (more scan points within 3σ of
+   the model, registered the same way from the prediction). The best accepted candidate wins unless
+   the scan is **ambiguous** on the map (:meth:`Relocalizer._ambiguous`: quarter and half turns of
+   it converge to another pose that fits as well; a near-symmetric target).
 
-**When** (evidence only, :meth:`Relocalizer.check`): after ``lost_after`` consecutive frames
-that were not ``ok`` (then every ``reloc_every`` frames while lost), and on a *suspect step*: an
-``ok`` step whose robust RMS exceeds ``reloc_rms_ratio`` × the recent steps' median and that is
-a jump (recovered under the weak prior, a χ² against the motion model above ``reloc_chi2``, or
-a step while lost), or whose RMS exceeds ``reloc_suspect_ratio`` × that median whatever its χ²,
-or whose overlap falls below ``reloc_overlap_ratio`` × the recent median (at least 0.99 on
+**When** (evidence only, :meth:`Relocalizer.check`): after ``reloc.lost_after`` consecutive frames
+that were not ``ok`` (then every ``reloc.every`` frames while lost), and on a *suspect step*: an
+``ok`` step whose robust RMS exceeds ``reloc.rms_ratio`` × the recent steps' median and that is
+a jump (recovered under the weak prior, a χ² against the motion model above ``reloc.chi2``, or
+a step while lost), or whose RMS exceeds ``reloc.suspect_ratio`` × that median whatever its χ²,
+or whose overlap falls below ``reloc.overlap_ratio`` × the recent median (at least 0.99 on
 every right step of the suite; 0.55–0.80 at kidnaps). **[interpretation, measured]** A kidnap
 (frames missing, the target far from the prediction) is usually *not* a failed step: the
 registration settles on a wrong pose that fits the scan 2–3× worse than the recent steps (χ²
 sometimes small: the prior holds the pose), the map is corrupted, and every later step tracks
 it without complaint. A suspect step that the relocaliser does not confirm is therefore
-flagged ``failed`` (pose = prediction, map untouched), at most ``reloc_max_doubt`` times in a row
+flagged ``failed`` (pose = prediction, map untouched), at most ``reloc.max_doubt`` times in a row
 (then the navigator's own judgement stands again: a helical approach sees new surfaces whose
 RMS stays above a stale median, and a frozen map would never catch up).
 
 An accepted relocalisation returns an ``ok`` result with ``info["relocalised"] = True`` and a
 message; :class:`~relnav.navigation.navigator.Navigator` resets its motion filter for it
-(``reloc_velocity``), then updates it at the verified pose and inserts the scan into the map.
+(``reloc.velocity``), then updates it at the verified pose and inserts the scan into the map.
 ``timings["relocalise"]`` holds each attempt's time. On the navigation suite's 17 unmodified
 sequences and the 4 held-out ones the relocaliser never triggers (same poses with it on and
 off; ``benchmarks/nav/nav_relocalize.py --unmodified``).

@@ -4,11 +4,11 @@ A simulator that samples one model cloud of the target once and renders every sc
 (paper 1's data generation: hidden point removal per pose, then range noise) gives scans whose
 points are the *same surface points* from frame to frame. There the in-plane position of each
 point is measured, and point-to-point registration onto the map's points is nearly exact, while
-the navigator's point-to-plane solver (a weak in-plane pull, ``inplane_sigma``) lets the pose
+the navigator's point-to-plane solver (a weak in-plane pull, ``map.inplane_sigma``) lets the pose
 slide along the surface. **[measured]** On sim-bennu the first step (no motion prior yet) slid
 0.72 m, and the map kept the error: APE 0.82 m against KISS-ICP's 0.30 m.
 
-Per frame (:class:`RepeatedPoints`, option ``repeat_refine`` of the navigator):
+Per frame (:class:`RepeatedPoints`, option ``solver.repeat_refine`` of the navigator):
 
 1. **Same rays?** (:meth:`RepeatedPoints.observe_rays`) A sensor with a fixed ray pattern (a
    flash LIDAR's pixels, a scanner's beams) fires the same directions every frame; when it
@@ -18,31 +18,31 @@ Per frame (:class:`RepeatedPoints`, option ``repeat_refine`` of the navigator):
    over the median range) of the previous scan's (measured on the suite: flash sequences
    0.42–1.0 per frame, paper 1's presets at most 0.03). Then nothing else is done.
 2. **Refine** the point-to-plane answer point to point (:meth:`RepeatedPoints.refine`) with the
-   whole scan (before the point budget ``max_points``: a repeated point is an exact constraint,
+   whole scan (before the point budget ``map.max_points``: a repeated point is an exact constraint,
    so all of them are used; sim-eoi's 3 500-point scans: APE 0.032 → 0.014 m, 30 → 47 ms per
    frame): isotropic information ``I / σ²``, ``σ = repeat_refine · s₀``, on every map point,
    started at the point-to-plane answer (point to point from the prediction loses the capsule
    of sim-orion, APE 0.08 → 78.7 m: its first step settles at "no motion").
 3. **Evidence** (:meth:`RepeatedPoints.evidence`): the fraction of the scan whose points lie on
-   the ray of a point of the previous accepted scan (within ``σ`` across the ray, ``s₀`` along
-   it). A LIDAR's noise is along its rays, so a surface point seen again lies on the same ray
-   line up to the pose error; a fresh sample is that close across the ray with probability
-   about ``π (σ/s₀)²``. The previous scan is taken whole, before the point budget, so that a
-   random budget does not hide the repetition. The point-to-point answer is kept when the
-   fraction is at least ``repeat_fraction`` (measured: fresh samples 0.01–0.08, repeated points
-   0.63–1.0 per frame).
+   the ray of a point of the previous accepted scan (within ``σ`` across the ray, ``s₀`` along it).
+   A LIDAR's noise is along its rays, so a surface point seen again lies on the same ray line up to
+   the pose error; a fresh sample is that close across the ray with probability about ``π (σ/s₀)²``.
+   The previous scan is taken whole, before the point budget, so that a random budget does not hide
+   the repetition. The point-to-point answer is kept when the fraction is at least
+   ``solver.repeat_fraction`` (measured: fresh samples 0.01–0.08, repeated points 0.63–1.0 per
+   frame).
 4. **Cost**: a second solve on frames whose rays do not repeat; after ``PATIENCE`` tested frames
    in a row without repetition, the test runs on every ``RETEST``-th frame only.
 
-**[measured]** Suite APE (m), ``repeat_refine`` 0 → 0.1 (``python benchmarks/nav/nav_suite.py --out
-bench/nav --methods relnav``): sim-eoi 0.053 → 0.014, sim-helical 0.085 → 0.030, sim-voyager
+**[measured]** Suite APE (m), ``solver.repeat_refine`` 0 → 0.1 (``python benchmarks/nav/nav_suite.py
+--out bench/nav --methods relnav``): sim-eoi 0.053 → 0.014, sim-helical 0.085 → 0.030, sim-voyager
 0.048 → 0.036, sim-orion 0.542 → 0.076, sim-bennu 0.817 → 0.141; the other 12 sequences are
-unchanged to the last digit (the flash sequences never try it, the ``-resample`` presets never
-keep it). Without the ray test the flash sequences were lost (eros-ellipse-64 58 m). 0.1 is the
-only ``σ`` tried. A per-voxel variant (point-to-point information for map voxels whose points
-scatter below ``voxel/√12``) was tried first: sim-orion 0.13–0.15 m but sim-bennu 1.14 m (the
-first step's error is made before any voxel has repeated), and on sim-eoi the voxel (9 mm) is
-smaller than the noise (1 cm), so repetition is invisible at that scale.
+unchanged to the last digit (the flash sequences never try it, the ``-resample`` presets never keep
+it). Without the ray test the flash sequences were lost (eros-ellipse-64 58 m). 0.1 is the only
+``σ`` tried. A per-voxel variant (point-to-point information for map voxels whose points scatter
+below ``voxel/√12``) was tried first: sim-orion 0.13–0.15 m but sim-bennu 1.14 m (the first step's
+error is made before any voxel has repeated), and on sim-eoi the voxel (9 mm) is smaller than the
+noise (1 cm), so repetition is invisible at that scale.
 """
 
 from __future__ import annotations
@@ -76,8 +76,8 @@ class RepeatedPoints:
     Parameters
     ----------
     config : NavigatorConfig
-        The navigator's options (``repeat_refine``, ``repeat_fraction``, ``repeat_max_points``,
-        ``min_points``).
+        The navigator's options (``solver.repeat_refine``, ``solver.repeat_fraction``,
+        ``solver.repeat_max_points``, ``solver.min_points``).
 
     Attributes
     ----------
@@ -106,7 +106,7 @@ class RepeatedPoints:
     def observe_rays(self, P: np.ndarray, spacing0: float) -> bool:
         """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m);
         whether they repeat the previous scan's (see the module doc). Sets :attr:`same_rays`
-        and :attr:`ray_fraction`; nothing is done with ``repeat_refine`` off."""
+        and :attr:`ray_fraction`; nothing is done with ``solver.repeat_refine`` off."""
         if self.config.solver.repeat_refine <= 0:
             return False
         u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
@@ -126,7 +126,7 @@ class RepeatedPoints:
         self._cloud, self._tree = (P_full, pose.copy()), None
 
     def should_test(self, frame: int) -> bool:
-        """Whether to refine this frame (``repeat_refine`` on, rays not repeated, not resting
+        """Whether to refine this frame (``solver.repeat_refine`` on, rays not repeated, not resting
         after ``PATIENCE`` misses unless the frame is a ``RETEST``-th)."""
         if self.config.solver.repeat_refine <= 0 or self.same_rays:
             return False
@@ -147,7 +147,7 @@ class RepeatedPoints:
     ) -> tuple[ScanToMapFit, float, bool]:
         """The navigator's hook: refine the point-to-plane registration ``fit`` when this
         frame is tested (:meth:`should_test`) and keep the point-to-point answer if the
-        evidence reaches ``repeat_fraction``.
+        evidence reaches ``solver.repeat_fraction``.
 
         Parameters
         ----------

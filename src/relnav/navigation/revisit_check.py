@@ -1,16 +1,16 @@
-"""Online test of the navigator's map at revisits (option ``revisit_alarm_chi2``).
+"""Online test of the navigator's map at revisits (option ``loops.revisit_alarm_chi2``).
 
 The navigator tracks against its own map, so once the map is inconsistent — a start-up that
-under-rotated, a roll that crept in mid-run — every later scan fits it, every step looks right
-and the pose is metres off without a flag. A revisit can tell: when the sensor comes back near
-a keyframe it has passed (same place and viewing direction in the target frame, at least
-``loop_min_separation`` keyframes earlier), the new keyframe's submap registered onto the old
-one's measures their relative pose independently of the chain of steps between them. Its
-disagreement with the chain, weighed by the chain's composed step covariances plus the
-registration's own (χ², 6 dof), is the test; an alarm is raised when it exceeds
-``revisit_alarm_chi2`` and every later ``ok`` step is ``flagged`` until a revisit agrees again.
-A revisit whose registration lacks the evidence (overlap, residual, a non-degenerate
-information: the loop edge's gates but the χ²) neither raises nor clears the alarm.
+under-rotated, a roll that crept in mid-run — every later scan fits it, every step looks right and
+the pose is metres off without a flag. A revisit can tell: when the sensor comes back near a
+keyframe it has passed (same place and viewing direction in the target frame, at least
+``loops.min_separation`` keyframes earlier), the new keyframe's submap registered onto the old one's
+measures their relative pose independently of the chain of steps between them. Its disagreement with
+the chain, weighed by the chain's composed step covariances plus the registration's own (χ², 6 dof),
+is the test; an alarm is raised when it exceeds ``loops.revisit_alarm_chi2`` and every later ``ok``
+step is ``flagged`` until a revisit agrees again. A revisit whose registration lacks the evidence
+(overlap, residual, a non-degenerate information: the loop edge's gates but the χ²) neither raises
+nor clears the alarm.
 
 This is :class:`~relnav.navigation.pose_graph.LoopCloser`'s revisit test run while tracking
 (its registration, gates and χ²), on keyframes built from the past frames only, at the poses

@@ -119,14 +119,14 @@ class MapSolver:
         """Register ``P`` again from the answer ``fit`` displaced along its weakest direction.
 
         **[interpretation]** A step whose answer depends on where the solver starts is not
-        determined by the scan. The weakest direction is the smallest eigenvector of the
-        answer's information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled
-        by the lever arm ``radius`` (m); the start is displaced by ``stability_k`` σ along it,
-        at most ``stability_cap`` map voxels (metres of translation, or of arc at ``radius``).
-        The second answer goes through the same point-to-point refinement on repeated points
-        as the first. The answers' distance is measured in the same information (σ). Returns the
-        better-fitting answer (lower robust RMS, the first on ties) and whether the distance
-        exceeds ``stability_gate``.
+        determined by the scan. The weakest direction is the smallest eigenvector of the answer's
+        information ``H / σ̂² + Λ`` (left twist, target frame) with rotations scaled by the lever
+        arm ``radius`` (m); the start is displaced by ``integrity.stability_k`` σ along it, at most
+        ``integrity.stability_cap`` map voxels (metres of translation, or of arc at ``radius``). The
+        second answer goes through the same point-to-point refinement on repeated points as the
+        first. The answers' distance is measured in the same information (σ). Returns the
+        better-fitting answer (lower robust RMS, the first on ties) and whether the distance exceeds
+        ``integrity.stability_gate``.
         """
         c = self.config
         assert self.map is not None
@@ -231,11 +231,11 @@ class MapSolver:
         start: np.ndarray | None = None,
     ) -> dict[str, Any]:
         """One registration onto the map and its quality figures (``rng``: the scan's median
-        range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration,
-        under the motion model's prior). With ``repeat_refine`` the answer is refined point to
+        range, ``radius``: its lever arm, both m; ``primary``: the frame's first registration, under
+        the motion model's prior). With ``solver.repeat_refine`` the answer is refined point to
         point when the scan repeats the previous scan's surface points
-        (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the
-        solver when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
+        (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the solver
+        when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
         ``voxel_map``: register onto that map instead of the navigator's."""
         c = self.config
         target = self.map if voxel_map is None else voxel_map

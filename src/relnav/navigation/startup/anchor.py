@@ -1,4 +1,4 @@
-"""Re-anchoring the navigator's start-up (``reanchor_frame``): the first scan on the later map.
+"""Re-anchoring the start-up (``startup.reanchor_frame``): the first scan on the later map.
 
 **[interpretation, measured]** On a sparse flash scan the first steps are registered onto a map of
 one to a few scans, and such a registration is wrong by degrees even when started at the true pose:
@@ -11,21 +11,21 @@ poses (voyager-tumble-64: 134 against 291). Tracking therefore turns the whole m
 error, 5–15° on the tumbling sequences, and keeps it: the map is self-consistent in a turned target
 frame (a gauge error), which no later registration sees.
 
-Once ``reanchor_frame`` frames are tracked, the map of the frames from ``reanchor_skip`` on
-(dense, away from the first scan's sample positions) is where the first scan is registered again,
-from its pose under the first frame's weak prior. Its answer ``T₀'`` measures the turn: the whole
-window but the first frame (the anchor) is turned by ``C = T₀ T₀'⁻¹`` in the target frame, frames
-``1 … reanchor_skip − 1`` by a growing share ``k / reanchor_skip`` of it **[interpretation]**: the
-start-up's error grew over them (the start-up window then rebuilds the map and restarts the
+Once ``startup.reanchor_frame`` frames are tracked, the map of the frames from
+``startup.reanchor_skip`` on (dense, away from the first scan's sample positions) is where the first
+scan is registered again, from its pose under the first frame's weak prior. Its answer ``T₀'``
+measures the turn: the whole window but the first frame (the anchor) is turned by ``C = T₀ T₀'⁻¹``
+in the target frame, frames ``1 … reanchor_skip − 1`` by a growing share ``k / reanchor_skip`` of it
+**[interpretation]**: the start-up's error grew over them (the start-up window then rebuilds the map
+and restarts the
 filter and the smoother, as after the multi-view refinement:
-:class:`relnav.navigation.startup.StartupWindow`). The
-relative state turns every earlier frame by the whole of ``C`` (``StateRecord.gauge_turn``).
-The correction is refused (each test against χ²₆ at ``reanchor_gate``) when it is inconsistent
-with the start-up steps' covariance (frames 1 … ``reanchor_skip``, in the target frame) plus the
-registration's own, or when the first scan does not fit the later map significantly better at
-the corrected pose than where the start-up put it (the robust mean square's gain times the
-pairs, against what six free parameters take from noise): a target whose surface slides along
-itself lets the single scan slide too.
+:class:`relnav.navigation.startup.StartupWindow`). The relative state turns every earlier frame by
+the whole of ``C`` (``StateRecord.gauge_turn``). The correction is refused (each test against χ²₆ at
+``startup.reanchor_gate``) when it is inconsistent with the start-up steps' covariance (frames 1 …
+``startup.reanchor_skip``, in the target frame) plus the registration's own, or when the first scan
+does not fit the later map significantly better at the corrected pose than where the start-up put it
+(the robust mean square's gain times the pairs, against what six free parameters take from noise): a
+target whose surface slides along itself lets the single scan slide too.
 
 Not a default: it helps where the start-up error is large and can hurt where it is already
 small (one sparse scan's registration, about 0.5°, is then the larger error); see the
@@ -74,7 +74,8 @@ def reanchor(
 
     Returns the outcome's record (``"kind": "reanchor"``, why when refused) and, when accepted,
     the turn ``G`` (4, 4) of the target frame applied to the frames after the first
-    ``reanchor_skip`` (the earlier ones take a share of it; the poses of ``frames`` are turned
+    ``startup.reanchor_skip`` (the earlier ones take a share of it; the poses of ``frames`` are
+    turned
     in place), the poses before the turn and its angle (deg); None when refused."""
     c = solver.config
     assert solver.map is not None

@@ -1,10 +1,10 @@
-"""Multi-view refinement of the navigator's first frames (``init_window``).
+"""Multi-view refinement of the navigator's first frames (``startup.window``).
 
 **[interpretation]** On the suite's orbits and on the tumbling target the navigator's error is
 mostly a near-constant rotation of the whole map about the target, set in the first frames:
 each early step is registered onto a map of only a few sparse scans, under a motion prior whose
 velocity is not known yet, and such a step is weak in the target's aspect (a rotation about the
-target against a lateral translation). Once ``init_window`` frames are tracked, their poses
+target against a lateral translation). Once ``startup.window`` frames are tracked, their poses
 (the first one fixed: the anchor) are refined from all of them at once, the map is rebuilt from
 the refined poses and the motion filter goes on from the refined last pose, with its own
 velocity (``startup.velocity="keep"``) or the refined last steps' (``"refined"``)
@@ -14,7 +14,7 @@ velocity (``startup.velocity="keep"``) or the refined last steps' (``"refined"``
   with the nearest point of another frame, both poses in the residual, plane information from
   the union of the frames, constant-velocity terms on consecutive triples
   (:func:`_joint_system`); kept only if it is more certain of the last pose than the filter
-  (``init_check``, :func:`_joint_is_surer`).
+  (``startup.check``, :func:`_joint_is_surer`).
 * ``loo``: each frame in turn registered onto the voxel map of the others (leave-one-out,
   Gauss–Seidel sweeps) with the navigator's own solver.
 
@@ -126,12 +126,12 @@ def _joint_refine(
     memo: PairMemo,
 ) -> int:
     """Levenberg–Marquardt over the poses of ``used`` but the first (the anchor), with the
-    solver's graduated kernel (``kernel_start`` × ``kernel_decay`` per round down to
-    ``kernel``); returns the rounds run.
+    solver's graduated kernel (``solver.kernel_start`` × ``solver.kernel_decay`` per round down to
+    ``solver.kernel``); returns the rounds run.
 
     A step is kept only if it lowers the joint cost at the same kernel (the pairs found
     again at the new poses); otherwise the poses are restored and the damping grows ×10
-    (÷3 after a kept step). Stops after ``init_rounds`` rounds, or once at the final kernel
+    (÷3 after a kept step). Stops after ``startup.rounds`` rounds, or once at the final kernel
     no pose moves by more than a tenth of a voxel (rotation times the scan's range) or the
     damping exceeds 10⁶ (no step lowers the cost).
     """
@@ -231,7 +231,7 @@ def _joint_system(
     weighted by the plane information of ``q``'s neighbourhood in the union of the frames
     (:func:`~relnav.navigation.voxel_map.plane_information`) and a Geman–McClure kernel
     of scale ``kern`` (cost ``ρ(d²) = k² d² / (k² + d²)``; an unpaired point costs ``k²``),
-    and both poses are in its Jacobian (left perturbations). With ``init_prior`` ``motion``
+    and both poses are in its Jacobian (left perturbations). With ``startup.prior`` ``motion``
     or ``velocity`` the constant-velocity terms are added (:func:`_motion_terms`,
     :func:`_velocity_terms`). The first frame's weak prior on each pose keeps ``H``
     regular (not in the cost).
@@ -512,7 +512,7 @@ def _neighbour_prior(
 def refine_window(
     frames: list[WindowFrame], solver: MapSolver, motion: ConstantVelocityFilter
 ) -> tuple[int, bool, list[np.ndarray]]:
-    """Multi-view refinement of the window's poses, leave-one-out (``init_window``).
+    """Multi-view refinement of the window's poses, leave-one-out (``startup.window``).
 
     **[interpretation]** A step registered onto a map of a few sparse scans, under a motion
     prior whose velocity is not yet known, is weak in the target's aspect (a rotation about
@@ -521,7 +521,7 @@ def refine_window(
     registered again onto the union of the *other* frames (several times denser than one
     scan), from its current pose under the first frame's weak prior (Gauss–Seidel: each
     new pose is used at once), in rounds until no pose moves by more than a tenth of a
-    voxel (rotation times the scan's range) or ``init_rounds``. A registration with too
+    voxel (rotation times the scan's range) or ``startup.rounds``. A registration with too
     few pairs or too little overlap keeps its pose. Frames not in the map follow the
     correction of the last accepted frame before them. Then the map is rebuilt from the
     refined poses, the filter's pose is the refined one and its velocity its own

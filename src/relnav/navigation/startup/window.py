@@ -3,10 +3,10 @@
 The first frames of a map are tracked onto a map of a few sparse scans under a motion prior whose
 velocity is not yet known; their errors stay in the map. The start-up window keeps those frames
 (:class:`~.multiview.WindowFrame`) and, at the frames its options name, corrects them: the
-multi-view refinement of ``init_window`` (and ``init_repeat``) frames
+multi-view refinement of ``startup.window`` (and ``startup.repeat``) frames
 (:func:`~.multiview.refine_window`) and the re-anchoring of the first scan at
-``reanchor_frame`` (:func:`~.anchor.reanchor`). A correction is returned to the navigator as a
-:class:`StartupCorrection`, which the navigator applies to its own map, motion filter and
+``startup.reanchor_frame`` (:func:`~.anchor.reanchor`). A correction is returned to the navigator as
+a :class:`StartupCorrection`, which the navigator applies to its own map, motion filter and
 trajectory: the window never writes the navigator's state.
 """
 
