@@ -264,6 +264,11 @@ OFF_SCALE = 20.0
 off-scale (clipped, its peak in the legend) so that it does not flatten the others."""
 
 
+ENVELOPE_CLIP = 4.0
+"""The error plots' ‖Δ‖ and rotation axes stop at this many times the largest error when a
+step envelope goes higher (its end value is then said in the legend)."""
+
+
 def step_envelope(step_sigma: np.ndarray) -> np.ndarray:
     """3σ of the accumulated steps: ``3 √(Σ_{j≤k} σ_j²)`` per frame, from per-step 1σ values
     (N, 2) [translation m, rotation deg] (NaN or inf: unknown, the envelope NaN from there)."""
@@ -310,7 +315,9 @@ def plot_errors(
     step_sigmas : mapping str → (N, 2) float64, optional
         Per-frame step 1σ [translation m, rotation deg] of a method (e.g. the navigator's
         ``step_sigma_t_m``, ``step_sigma_r_deg``): its accumulated 3σ envelope
-        (:func:`step_envelope`) is shaded under ``‖Δ‖`` and the rotation error.
+        (:func:`step_envelope`) is shaded under ``‖Δ‖`` and the rotation error; an envelope
+        above :data:`ENVELOPE_CLIP` times the largest error is clipped there (its end value
+        in the legend) so that the errors stay readable.
 
     Returns
     -------
@@ -359,16 +366,6 @@ def plot_errors(
         sig = np.asarray(sig, dtype=np.float64)
         if name in errs and sig.shape == (len(gt), 2):
             envelopes[name] = step_envelope(sig)
-            for ax, col in ((axes[0], 0), (axes[4], 1)):
-                ax.fill_between(
-                    x,
-                    0.0,
-                    envelopes[name][:, col],
-                    color=colours[name],
-                    alpha=0.15,
-                    lw=0,
-                    label=f"{name}: 3σ of its accumulated steps" if col == 0 else None,
-                )
     for ax, lab in zip(axes, labels, strict=True):
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
@@ -381,13 +378,37 @@ def plot_errors(
         v = v[np.isfinite(v)]
         return float(v.max(initial=0.0))
 
-    t_lim = span(
-        [errs[n].trans for n in kept] + [e[:, 0] for n, e in envelopes.items() if n in kept]
+    def limit(err: float, env: float) -> tuple[float, bool]:
+        """Axis top: the envelope's when it is comparable to the errors, else ENVELOPE_CLIP
+        times the largest error (the errors stay readable; the envelope is said off scale)."""
+        if err > 0 and env > ENVELOPE_CLIP * err:
+            return ENVELOPE_CLIP * err, True
+        return max(err, env), False
+
+    env_kept = [n for n in envelopes if n in kept]
+    t_lim, t_clip = limit(
+        span([errs[n].trans for n in kept]), span([envelopes[n][:, 0] for n in env_kept])
     )
-    r_lim = span(
-        [errs[n].rot_deg for n in kept] + [e[:, 1] for n, e in envelopes.items() if n in kept]
+    r_lim, r_clip = limit(
+        span([errs[n].rot_deg for n in kept]), span([envelopes[n][:, 1] for n in env_kept])
     )
     d_lim = span([errs[n].delta[:, i] for n in kept for i in range(3)])
+    for name, env in envelopes.items():
+        label = f"{name}: 3σ of its accumulated steps"
+        if (t_clip or r_clip) and not log_scale:
+            last = env[np.isfinite(env).all(axis=1)]
+            if len(last):
+                label += f" (off scale: {last[-1, 0]:.3g} m, {last[-1, 1]:.3g}° at the end)"
+        for ax, col in ((axes[0], 0), (axes[4], 1)):
+            ax.fill_between(
+                x,
+                0.0,
+                env[:, col],
+                color=colours[name],
+                alpha=0.15,
+                lw=0,
+                label=label if col == 0 else None,
+            )
     if log_scale:
         for ax in (axes[0], axes[4]):
             ax.set_yscale("log", nonpositive="mask")
