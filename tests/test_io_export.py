@@ -72,6 +72,15 @@ def test_export_round_trips_and_runs_odometry(sim_seq: Path, tmp_path: Path, fmt
     assert est.shape == (N_FRAMES, 8)
     np.testing.assert_allclose(est[:, 0], src.timestamps, atol=1e-6)
 
+    # relnav view: a KITTI folder with poses.txt draws; a recording (no ground truth) is one line
+    png = tmp_path / "view.png"
+    r = runner.invoke(app, ["view", str(out), "--out", str(png), "--frames", "2"])
+    if fmt == "kitti":
+        assert r.exit_code == 0, r.output
+        assert png.stat().st_size > 0
+    else:
+        assert r.exit_code == 1 and "no ground truth" in str(r.exception or r.output)
+
 
 def test_export_empty_scan_and_mcap(sim_seq: Path, tmp_path: Path) -> None:
     """A scan with no point survives both formats as an empty scan; MCAP storage too."""

@@ -37,16 +37,17 @@ def render_sequence(
     import matplotlib.pyplot as plt
 
     from relnav.geometry.se3 import transform_points
-    from relnav.io.sequences import ScanSequence
+    from relnav.io.sources import open_sequence
 
-    seq = ScanSequence(folder, sensor=sensor or None)
+    seq = open_sequence(folder, sensor=sensor or None)
     n = len(seq)
     if n == 0:
         raise InputError(f"{folder}: no scans to view")
-    gt = seq.gt_poses
+    gt = getattr(seq, "gt_poses", None)
     if gt is None:
         raise InputError(
-            f"{seq.layout.gt}: no ground truth; relnav view draws scans in the target frame"
+            f"{folder}: no ground truth (a recording or a plain folder has none); relnav view "
+            "draws scans in the target frame, with the ground truth's poses"
         )
     k = max(1, min(int(frames), n))
     idx = np.unique(np.round(np.linspace(0, n - 1, k)).astype(int))
@@ -64,7 +65,8 @@ def render_sequence(
 
     fig = plt.figure(figsize=(15, 7))
     cmap = plt.get_cmap("viridis")
-    name = f" ({seq.sensor})" if seq.sensor else ""
+    sensor_name = getattr(seq, "sensor", None)
+    name = f" ({sensor_name})" if sensor_name else ""
     for panel, with_path in ((1, True), (2, False)):
         ax = fig.add_subplot(1, 2, panel, projection="3d")
         for j, (i, p_t) in enumerate(clouds):
@@ -108,7 +110,9 @@ def render_sequence(
 
 
 def view(
-    folder: Path = typer.Argument(..., help="Sequence folder (scans/ + ground truth)."),
+    folder: Path = typer.Argument(
+        ..., help="Sequence folder (scans/ + ground truth), or any input relnav reads."
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output image (.png, .pdf, .svg)."),
     frames: int = typer.Option(6, "--frames", "-k", min=1, help="Number of scans to draw."),
     sensor: str | None = typer.Option(
