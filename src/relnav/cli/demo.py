@@ -123,7 +123,7 @@ def _worker_init(queue: Any) -> None:
     global _QUEUE
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _QUEUE = queue
-    import relnav.pipeline  # noqa: F401
+    import relnav.pipeline.run  # noqa: F401  (the registry: navigator, odometry, methods)
 
 
 def _worker_run(*job: Any) -> tuple[dict[str, Any], _Trajectory]:

@@ -14,33 +14,34 @@ folder), :mod:`~relnav.pipeline.registry` (method names that are trackers:
 Layer: above odometry, navigation and eval (it imports them), below bench and cli (they call it).
 """
 
-from relnav.pipeline.outputs import PoseFormat, write_run_outputs
-from relnav.pipeline.registry import (
-    available_trackers,
-    register_tracker,
-    tracker_entry,
-    unregister_tracker,
-)
-from relnav.pipeline.run import (
-    OdometryPipeline,
-    PipelineResult,
-    make_tracker,
-    resolve_method,
-    run_pipeline,
-    run_sequence,
-)
+from __future__ import annotations
 
-__all__ = [
-    "OdometryPipeline",
-    "PipelineResult",
-    "PoseFormat",
-    "available_trackers",
-    "make_tracker",
-    "register_tracker",
-    "resolve_method",
-    "run_pipeline",
-    "run_sequence",
-    "tracker_entry",
-    "unregister_tracker",
-    "write_run_outputs",
-]
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "OdometryPipeline": "relnav.pipeline.run",
+    "PipelineResult": "relnav.pipeline.run",
+    "make_tracker": "relnav.pipeline.run",
+    "resolve_method": "relnav.pipeline.run",
+    "run_pipeline": "relnav.pipeline.run",
+    "run_sequence": "relnav.pipeline.run",
+    "PoseFormat": "relnav.pipeline.outputs",
+    "write_run_outputs": "relnav.pipeline.outputs",
+    "available_trackers": "relnav.pipeline.registry",
+    "register_tracker": "relnav.pipeline.registry",
+    "tracker_entry": "relnav.pipeline.registry",
+    "unregister_tracker": "relnav.pipeline.registry",
+}
+"""Re-exported lazily: ``import relnav.pipeline`` (and the CLI, which imports
+:mod:`relnav.pipeline.outputs` at start-up) stays cheap; the registry, and with it the navigator
+and paper 2's methods, is imported on first use."""
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    mod = _EXPORTS.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'relnav.pipeline' has no attribute {name!r}")
+    return getattr(importlib.import_module(mod), name)
