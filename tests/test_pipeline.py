@@ -219,3 +219,18 @@ def test_any_form_of_method_runs_and_bad_ones_are_refused(moving_cloud, tmp_path
     plain = run_pipeline([s.points for s in seq][:4], "icp-point", out=tmp_path / "plain")
     assert plain.status == "complete" and plain.metrics == {}  # no ground truth: no metrics
     assert "metrics.json" not in plain.outputs and "estimate.tum" in plain.outputs
+
+
+def test_the_cli_starts_without_the_registry():
+    """``relnav --help`` and every command's start stay cheap: the CLI imports the pipeline's
+    outputs module, not its registry (which imports the navigator and paper 2's methods)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, relnav.cli.main; "
+        "print(sorted(m for m in ('relnav.pipeline.registry', 'relnav.navigation.navigator') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
