@@ -42,3 +42,14 @@ def test_envelope_near_the_errors_sets_the_scale(monkeypatch, tmp_path) -> None:
     assert top >= plots.step_envelope(sig)[-1, 0]  # the whole envelope is visible
     texts = [t.get_text() for t in figs[0].legends[0].get_texts()]
     assert not any("off scale" in t for t in texts)
+
+
+def test_a_name_matplotlib_would_hide_is_still_in_the_legend(monkeypatch, tmp_path) -> None:
+    """matplotlib drops legend labels starting with ``_`` (and then failed on an empty legend):
+    a method named ``_Mine`` is drawn and named ``Mine``."""
+    figs = _capture(monkeypatch)
+    gt, est = _poses(8, 0.05)
+    sig = np.full((8, 2), [0.01, 0.1])
+    plots.plot_errors(tmp_path / "e.png", gt, {"_Mine": est}, step_sigmas={"_Mine": sig})
+    texts = [t.get_text() for t in figs[0].legends[0].get_texts()]
+    assert "Mine" in texts and any(t.startswith("Mine: 3σ") for t in texts), texts

@@ -11,8 +11,9 @@ import numpy as np
 import typer
 
 from relnav.cli._common import console
-from relnav.cli.evaluate import Align, DeltaUnit, json_safe, read_poses
+from relnav.cli.evaluate import Align, DeltaUnit, read_poses
 from relnav.errors import InputError
+from relnav.pipeline.outputs import json_safe
 
 ERRORS = ("ape_trans", "ape_rot", "rpe_trans", "rpe_rot")
 _UNITS = {"ape_trans": "m", "ape_rot": "deg", "rpe_trans": "m", "rpe_rot": "deg"}

@@ -263,12 +263,12 @@ def demo(
 
     from rich.table import Table
 
-    from relnav.cli.evaluate import json_safe
     from relnav.eval.metrics import match_trajectories
     from relnav.eval.plots import plot_errors, plot_trajectories
     from relnav.io.runinfo import run_info, write_run_info
     from relnav.io.sequences import ScanSequence
     from relnav.pipeline import resolve_method
+    from relnav.pipeline.outputs import json_safe
     from relnav.sim.presets import get_preset
 
     method = list(method) if method else default_methods()

@@ -14,6 +14,7 @@ from rich.markup import escape
 
 from relnav.cli._common import console
 from relnav.errors import InputError
+from relnav.pipeline.outputs import json_safe
 
 
 class Align(StrEnum):
@@ -233,13 +234,6 @@ def frame_hints(
             "quaternions written w-first? (TUM lines are 'time x y z qx qy qz qw')"
         )
     return hints
-
-
-def json_safe(res: dict) -> dict:  # type: ignore[type-arg]
-    """NaN/inf → None so the JSON is standard."""
-    return {
-        k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in res.items()
-    }
 
 
 def evaluate(

@@ -49,7 +49,8 @@ def odometry(
     fmt: PoseFormat = typer.Option(
         PoseFormat.tum,
         "--format",
-        help="tum: estimate.tum; kitti: also estimate_kitti.txt (3x4 poses) and times.txt.",
+        help="OUTPUT pose format (the input's layout is detected): tum: estimate.tum; kitti: "
+        "also estimate_kitti.txt (3x4 poses) and times.txt.",
     ),
     viz: bool = typer.Option(
         False, "--viz", help="Stream scans and trajectories to the Rerun viewer (extra \\[viz])."

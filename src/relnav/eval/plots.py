@@ -30,6 +30,12 @@ def _check_estimates(estimates: Mapping[str, np.ndarray]) -> dict[str, np.ndarra
     return {str(k): _as_poses(f"estimates[{k!r}]", v) for k, v in estimates.items()}
 
 
+def _shown(name: str) -> str:
+    """A method's name as a legend shows it: matplotlib hides labels starting with ``_``, so
+    leading underscores are dropped (``"_Mine"`` → ``"Mine"``)."""
+    return name.lstrip("_") or name
+
+
 def new_figure(width: float, height: float) -> Figure:
     """A matplotlib figure (inches, constrained layout) on the Agg canvas: no ``pyplot``."""
     fig = Figure(figsize=(width, height), layout="constrained")
@@ -356,7 +362,7 @@ def plot_errors(
     colours = {n: f"C{i % 10}" for i, n in enumerate(est)}
     for name, pe in errs.items():
         curves = [pe.trans, pe.delta[:, 0], pe.delta[:, 1], pe.delta[:, 2], pe.rot_deg]
-        label = name
+        label = _shown(name)
         if name in off:
             label = f"{name} (off scale: peak {peaks[name]:.3g} m, {rpeaks[name]:.3g}°)"
         for ax, y in zip(axes, curves, strict=True):
@@ -394,7 +400,7 @@ def plot_errors(
     )
     d_lim = span([errs[n].delta[:, i] for n in kept for i in range(3)])
     for name, env in envelopes.items():
-        label = f"{name}: 3σ of its accumulated steps"
+        label = f"{_shown(name)}: 3σ of its accumulated steps"
         if (t_clip or r_clip) and not log_scale:
             last = env[np.isfinite(env).all(axis=1)]
             if len(last):

@@ -193,7 +193,7 @@ def _torque_free_attitudes(
     """Attitudes ``(m, K, 4)`` (xyzw) of torque-free motions at times ``t`` ``(K,)``, one per
     parameter row of ``p`` ``(m, 11)``: ``q0 ⊗ exp(p[:, :3])`` at ``t[0]``, body rate
     ``p[:, 3:6]`` (rad/s) and inertia :func:`_inertias`. Propagated as
-    :class:`~relnav.fusion.ukf.TwistorUKF` does (Runge–Kutta steps of at most 1 s for the rate,
+    :class:`~relnav.filtering.ukf.TwistorUKF` does (Runge–Kutta steps of at most 1 s for the rate,
     the attitude by the mean of a step's first and last rates)."""
     J = _inertias(p, V0)
     q = qmul(np.broadcast_to(q0, (len(p), 4)), Rotation.from_rotvec(p[:, :3]).as_quat())

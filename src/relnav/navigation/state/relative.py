@@ -5,7 +5,7 @@ The navigator (:class:`~relnav.navigation.navigator.Navigator`) gives per frame 
 measurements are independent across frames). :func:`relative_state` turns them into paper 2's
 observations (the target's origin and attitude in the sensor frame, ``T_sensor_target``, with the
 covariance ``H⁻¹`` mapped to ``[δp (sensor frame), δθ (target axes)]``) and runs
-:class:`relnav.fusion.tracker.Tracker` (twistor UKF, Clohessy–Wiltshire translation with mean
+:class:`relnav.filtering.tracker.Tracker` (twistor UKF, Clohessy–Wiltshire translation with mean
 motion ``n``; ``n = 0`` is a free double integrator). The result holds the target's position and
 velocity in the sensor frame, its attitude and its body rates, with covariances, per frame.
 
@@ -269,7 +269,7 @@ def relative_state(
     process_noise : {"physics", "poses"}
         ``"physics"`` (default) **[interpretation]**: no random walks; the target's position
         and attitude move only through their rates, which change by the accelerations below
-        held over each step (:class:`relnav.fusion.noise.ProcessNoise`), and the poses' white
+        held over each step (:class:`relnav.filtering.noise.ProcessNoise`), and the poses' white
         noise added to each scan's covariance is measured in the observations' coordinates
         (``pose_noise(frame="target")``). ``"poses"`` (the former default): per frame period
         the state may move by one step of the poses' white noise (:func:`pose_noise`, sensor
@@ -289,7 +289,7 @@ def relative_state(
         filter's own rate (``ProcessNoise.torque_free``; valid for a chaser holding an inertial
         attitude). ``"adaptive"`` **[interpretation]**: a bank of three filters taking 1, 1/10
         and 1/100 of that bound, mixed by the likelihood of their innovations
-        (:func:`relnav.fusion.multiple_model.mix_tracks`, probability floor 1e-3), so that the
+        (:func:`relnav.filtering.multiple_model.mix_tracks`, probability floor 1e-3), so that the
         data tell a target spinning about a principal axis (``ω̇ = 0``) from a tumbling one
         (one filter, as ``None``, with ``process_noise="poses"`` or a caller's ``q``). Not
         the default: over 20 noise seeds it brings envisat-tumble-64's worst rate error after
@@ -303,7 +303,7 @@ def relative_state(
         (each > 0; default 1, 1/10 and 1/100).
     bank_floor : float
         With ``angular_acceleration="adaptive"``: the bank's probability floor
-        (:func:`relnav.fusion.multiple_model.model_probabilities`; default 1e-3, in
+        (:func:`relnav.filtering.multiple_model.model_probabilities`; default 1e-3, in
         ``[0, 1/M)``): how fast a dormant member can take over.
     rigid_body : bool
         **[interpretation]** (UKF only) Identify a tumbling target's inertia from the
@@ -392,7 +392,7 @@ def relative_state(
         attitude error sim-orion-resample 49.0 → 1.3°, orion-inclined-64 27.4 → 5.3°,
         sim-bennu-resample 3.4 → 0.65°, the held-out orion-tilt60-64 24.2 → 7.6°.
     **tracker_options
-        Passed to :class:`relnav.fusion.tracker.Tracker` (``q`` replaces the process noise above,
+        Passed to :class:`relnav.filtering.tracker.Tracker` (``q`` replaces the process noise above,
         ``p0``, ``omega0``, ``gate_probability`` …). With the
         UKF, ``observer_bias`` defaults to True: each step's covariance
         (:func:`drift_covariance`) feeds the bias state, in the target's axes
@@ -400,7 +400,7 @@ def relative_state(
 
     Returns
     -------
-    relnav.fusion.tracker.TrackResult
+    relnav.filtering.tracker.TrackResult
     """
     if drift not in ("step", "map", "offset"):
         raise ConfigError(f"drift must be 'step', 'map' or 'offset', got {drift!r}")
