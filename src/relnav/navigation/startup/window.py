@@ -70,8 +70,8 @@ class StartupWindow:
     Parameters
     ----------
     config : NavigatorConfig
-        The navigator's options (``init_*``, ``reanchor_*`` and the solver's); inconsistent
-        ``init_*`` options raise :class:`~relnav.errors.ConfigError`.
+        The navigator's options (its ``startup`` section, and the map's and the solver's);
+        inconsistent ``startup`` options raise :class:`~relnav.errors.ConfigError`.
 
     Attributes
     ----------
