@@ -366,7 +366,7 @@ class Relocalizer:
     Parameters
     ----------
     config : NavigatorConfig
-        The navigator's options (its ``reloc_*`` fields and the solver's acceptance ones).
+        The navigator's options (its ``reloc`` section and the solver's acceptance fields).
     solver : MapSolver
         The navigator's registration onto its map (the map, ``s₀`` and the weak prior).
     start_position : (3,) float64
