@@ -797,3 +797,21 @@ def test_flat_option_names_of_the_last_release_still_work_with_a_warning():
     nested = navigator_config({"startup": {"window": 4}, "orbit": {"mean_motion": 1e-3}})
     assert legacy == dotted == nested
     assert dotted.startup.window == 4 and dotted.reloc == navigator_config().reloc
+
+
+def test_relnav_methods_lists_every_navigator_option_with_its_range():
+    """``relnav methods`` shows each ``section.key`` of the navigator with its default, range
+    and one line (the same fields the options are validated with)."""
+    from rich.console import Console
+
+    from relnav.cli.methods import navigator_options_table
+    from relnav.navigation.options import SECTIONS
+
+    console = Console(width=250, record=True)
+    console.print(navigator_options_table())
+    text = console.export_text()
+    n_fields = sum(len(m.model_fields) for m in SECTIONS.values())
+    rows = [line for line in text.splitlines() if line.startswith("│ ") and "." in line[:30]]
+    assert len(rows) == n_fields
+    row = next(line for line in rows if "solver.min_overlap" in line)
+    assert ">= 0 and <= 1" in row and "0.3" in row

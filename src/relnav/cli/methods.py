@@ -62,7 +62,7 @@ def methods() -> None:
             f"Point budget: pairwise methods without a [baselines] tag get scans above "
             f"{DEFAULT_POINT_BUDGET} points reduced to a seeded random {DEFAULT_BUDGET_TARGET} "
             "(-O point_budget=N, budget_target=M, budget_sampler=voxel; point_budget=None keeps "
-            "every point); the navigator keeps max_points; the peers use their own range-based "
+            "every point); the navigator keeps map.max_points; the peers use their own range-based "
             "downsampling on scans above 5000 points. Dense mode (beyond paper 1, reduced scans "
             f"only): feature pipelines describe a seeded random {DEFAULT_DENSE_KEYPOINTS} points "
             "of a reduced scan and their step is refined by point-to-plane ICP, the step check's "
@@ -87,6 +87,30 @@ def methods() -> None:
     for name, desc in available_estimators().items():
         parts.add_row("estimator", name, desc)
     console.print(parts)
+    console.print(navigator_options_table())
+
+
+def navigator_options_table() -> object:
+    """relnav's options, section by section: ``-O section.key=value``, default, range and
+    meaning (the fields of :data:`relnav.navigation.options.SECTIONS`)."""
+    from rich.table import Table
+
+    from relnav.navigation.options import SECTIONS, range_text
+
+    table = Table(
+        title="relnav's options (-O section.key=value; at length in docs/navigator.md, Options)"
+    )
+    for col in ("option", "default", "range", "meaning"):
+        table.add_column(col)
+    for section, model in SECTIONS.items():
+        for key, field in model.model_fields.items():
+            table.add_row(
+                f"{section}.{key}",
+                escape(repr(field.default)),
+                escape(range_text(field)),
+                escape(field.description or ""),
+            )
+    return table
 
 
 def register(app: typer.Typer) -> None:

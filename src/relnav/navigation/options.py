@@ -29,6 +29,7 @@ __all__ = [
     "in_map",
     "loop_closer_options",
     "navigator_config",
+    "range_text",
     "MapOptions",
     "SolverOptions",
     "PriorOptions",
@@ -707,7 +708,7 @@ def _one_line(err: ValidationError, where: str) -> str:
     if isinstance(value, float) and math.isnan(value):
         return f"{where}: option {name} is NaN"
     if e["type"] in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        return f"{where}: option {name}={value!r} out of range (must be {_range_text(field)})"
+        return f"{where}: option {name}={value!r} out of range (must be {range_text(field)})"
     if e["type"] == "finite_number":
         return f"{where}: option {name}={value!r} is not finite"
     kind = getattr(field.annotation, "__name__", None) or str(field.annotation)
@@ -715,7 +716,7 @@ def _one_line(err: ValidationError, where: str) -> str:
     return f"{where}: option {name}={value!r}: {e['msg']}{expected}"
 
 
-def _range_text(field: Any) -> str:
+def range_text(field: Any) -> str:
     """``">= 0 and <= 1"`` from a field's bounds."""
     parts = []
     for m in field.metadata:
