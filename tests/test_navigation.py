@@ -90,6 +90,7 @@ def test_bad_scan_is_flagged_and_tracking_continues(orbit_seq, bad):
         ({"solver.min_overlap": 1.5}, "must be >= 0 and <= 1"),
         ({"prior.sigma_acc_t": float("nan")}, "NaN"),
         ({"solver": {"kernel": -1.0}}, "solver.kernel=-1.0 out of range"),
+        ({"startup": {"windw": 4}}, "did you mean 'startup.window'"),  # -O startup.windw=4
     ],
 )
 def test_bad_option_is_a_config_error(options, needle):

@@ -647,11 +647,13 @@ def _nest(options: dict[str, Any], where: str) -> dict[str, dict[str, Any]]:
     nearest names."""
     nested: dict[str, dict[str, Any]] = {}
     known = [f"{s}.{k}" for s, m in SECTIONS.items() for k in m.model_fields]
-    for key, value in options.items():
+    flat: list[tuple[str, Any]] = []
+    for key, value in options.items():  # a section's mapping → its dotted keys, in order
         if key in SECTIONS and isinstance(value, dict):
-            for k, v in value.items():
-                nested.setdefault(key, {})[k] = v
-            continue
+            flat += [(f"{key}.{k}", v) for k, v in value.items()]
+        else:
+            flat.append((key, value))
+    for key, value in flat:
         dotted = key
         if key in LEGACY_NAMES:
             dotted = LEGACY_NAMES[key]
@@ -701,7 +703,7 @@ def _one_line(err: ValidationError, where: str) -> str:
     ``…: <pydantic's message> (expected <type>)``."""
     e = err.errors()[0]
     loc = [str(x) for x in e["loc"]]
-    if len(loc) != 2 or loc[0] not in SECTIONS:
+    if len(loc) != 2 or loc[0] not in SECTIONS or loc[1] not in SECTIONS[loc[0]].model_fields:
         return format_validation_error(err, where)
     field = SECTIONS[loc[0]].model_fields[loc[1]]
     name, value = ".".join(loc), e.get("input")
