@@ -816,3 +816,20 @@ def test_relnav_methods_lists_every_navigator_option_with_its_range():
     assert len(rows) == n_fields
     row = next(line for line in rows if "solver.min_overlap" in line)
     assert ">= 0 and <= 1" in row and "0.3" in row
+
+
+def test_cli_says_a_flat_option_name_is_deprecated_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from relnav.cli.main import app
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    seq = tmp_path / "seq"
+    simulate(get_preset("sim-voyager", max_frames=4, seed=1), seq)
+    args = ["odometry", str(seq), "--no-state", "-O", "init_window=0", "--out", str(tmp_path / "r")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "warning: method 'relnav': option 'init_window' is now 'startup.window'" in text
+    assert "options.py" not in text  # the message, not a source location

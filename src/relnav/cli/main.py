@@ -69,6 +69,13 @@ def _root(
         handlers=[RichHandler(console=err_console, show_path=False)],
         force=True,
     )
+    if not verbose:  # a warning is one line of meaning, not a source location
+        import warnings
+
+        def one_line(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+            err_console.print(f"[yellow]warning:[/] {escape(str(message))}", highlight=False)
+
+        warnings.showwarning = one_line
 
 
 for _name in COMMAND_MODULES:
