@@ -109,7 +109,7 @@ class Navigator:
         self.config = navigator_config(options, where="method 'relnav'")
         self.attitude = attitude
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
-        self.repeats = RepeatedPoints(self.config)
+        self.repeats = RepeatedPoints(self.config.solver)
         self.solver = MapSolver(self.config, self.repeats)  # holds the map
         self.motion: ConstantVelocityFilter | None = None
         self.n_frames = 0
@@ -144,7 +144,11 @@ class Navigator:
 
     def _new_relocalizer(self) -> Relocalizer | None:
         c = self.config
-        return Relocalizer(c, self.solver, self._initial_pose[:3, 3]) if c.reloc.enabled else None
+        return (
+            Relocalizer(c.reloc, self.solver, self._initial_pose[:3, 3])
+            if c.reloc.enabled
+            else None
+        )
 
     # ------------------------------------------------------------------ main entry
     def register_frame(self, scan: Scan | np.ndarray) -> OdometryStep:
@@ -189,7 +193,7 @@ class Navigator:
         self._boot_velocity = (v, P_vv)
         self.loop_closer, self.revisits = None, None
         self.symmetry, self._sym_count = None, 0
-        self.repeats = RepeatedPoints(self.config)
+        self.repeats = RepeatedPoints(self.config.solver)
         self.solver = MapSolver(self.config, self.repeats)  # no map: the first frame builds it
         self.relocalizer = self._new_relocalizer()
         out = last

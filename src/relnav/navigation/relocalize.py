@@ -74,7 +74,7 @@ from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
 if TYPE_CHECKING:
-    from relnav.navigation.options import NavigatorConfig
+    from relnav.navigation.options import RelocOptions
     from relnav.navigation.solver import MapSolver
 
 __all__ = ["DescribedCloud", "Relocalizer", "candidate_poses", "describe", "max_clique"]
@@ -365,18 +365,20 @@ class Relocalizer:
 
     Parameters
     ----------
-    config : NavigatorConfig
-        The navigator's options (its ``reloc`` section and the solver's acceptance fields).
+    options : RelocOptions
+        The navigator's ``reloc`` options.
     solver : MapSolver
-        The navigator's registration onto its map (the map, ``s₀`` and the weak prior).
+        The navigator's registration onto its map (the map, ``s₀``, the weak prior and the
+        solver's acceptance options: ``solver.min_points``, ``min_overlap``,
+        ``min_degeneracy``).
     start_position : (3,) float64
         The sensor's start position, target frame, m: the viewpoint of the map's description
         before any step was accepted.
     """
 
-    def __init__(self, config: NavigatorConfig, solver: MapSolver, start_position: np.ndarray):
-        get_descriptor(config.reloc.descriptor)  # ConfigError now, not at the first loss
-        self.config = config
+    def __init__(self, options: RelocOptions, solver: MapSolver, start_position: np.ndarray):
+        get_descriptor(options.descriptor)  # ConfigError now, not at the first loss
+        self.options = options
         self.solver = solver
         self.start_position = np.array(start_position, dtype=float)
         self.lost = 0
@@ -409,30 +411,26 @@ class Relocalizer:
         the navigator resets its motion filter before it takes it), or ``result`` flagged
         ``failed`` (a suspect jump the relocaliser did not confirm).
         """
-        c = self.config
+        c = self.options
         info = result.info
         rms = float(info.get("robust_rms_sigma", float("nan")))
         ref = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
-        jump = (
-            bool(info.get("recovered"))
-            or info.get("chi2_motion", 0.0) > c.reloc.chi2
-            or self.lost > 0
-        )
+        jump = bool(info.get("recovered")) or info.get("chi2_motion", 0.0) > c.chi2 or self.lost > 0
         overlap = float(info.get("overlap", 1.0))
         ref_overlap = float(np.median(self._recent_overlap)) if self._recent_overlap else 1.0
         suspect = (
             result.status == "ok"
             and np.isfinite(ref)
-            and self._doubted < c.reloc.max_doubt
+            and self._doubted < c.max_doubt
             and (
-                (jump and not rms <= c.reloc.rms_ratio * ref)
-                or not rms <= c.reloc.suspect_ratio * ref
-                or overlap < c.reloc.overlap_ratio * ref_overlap
+                (jump and not rms <= c.rms_ratio * ref)
+                or not rms <= c.suspect_ratio * ref
+                or overlap < c.overlap_ratio * ref_overlap
             )
         )
         out = result
-        if suspect or (result.status != "ok" and self.lost + 1 >= c.reloc.lost_after):
-            due = suspect or self._since_attempt + 1 >= c.reloc.every
+        if suspect or (result.status != "ok" and self.lost + 1 >= c.lost_after):
+            due = suspect or self._since_attempt + 1 >= c.every
             if due:
                 self._since_attempt = 0
                 ts = time.perf_counter()
@@ -484,7 +482,7 @@ class Relocalizer:
         ambiguous, and it is not used. Measured on envisat-tumble-64 (50 points per scan): a
         quarter turn fitted with RMS 0.53, the half turn 0.60, the true pose 0.88 (σ units).
         """
-        c, solver = self.config, self.solver
+        c, solver = self.options, self.solver
         T = best["T"]
         X = P @ T[:3, :3].T + T[:3, 3]
         M = self._model_description().points
@@ -506,8 +504,8 @@ class Relocalizer:
                 dt, dr = _distance(fit["T"], T)
                 if (
                     (dt > 0.5 or dr > 5.0)
-                    and fit["fitness"] >= (1.0 - c.reloc.ambiguity) * best["fitness"]
-                    and fit["rms"] <= (1.0 + c.reloc.ambiguity) * best["rms"]
+                    and fit["fitness"] >= (1.0 - c.ambiguity) * best["fitness"]
+                    and fit["rms"] <= (1.0 + c.ambiguity) * best["rms"]
                 ):
                     return fit
         return None
@@ -516,7 +514,7 @@ class Relocalizer:
         """The map's description (cached until the map changes)."""
         if self._model is not None and self._model[0] == self._map_version:
             return self._model[1]
-        c, solver = self.config, self.solver
+        c, solver = self.options, self.solver
         assert solver.map is not None
         s0 = solver.spacing0
         M = voxel_downsample(solver.map.means, s0)
@@ -525,10 +523,10 @@ class Relocalizer:
             views = self.start_position[None]
         model = describe(
             M,
-            c.reloc.descriptor,
-            c.reloc.radius * s0,
+            c.descriptor,
+            c.radius * s0,
             viewpoints=views,
-            max_keypoints=c.reloc.max_map_points,
+            max_keypoints=c.max_map_points,
             seed=self._map_version,
         )
         self._model = (self._map_version, model)
@@ -558,8 +556,8 @@ class Relocalizer:
         why : str
             What happened (for the log and the step's message).
         """
-        c, solver = self.config, self.solver
-        if solver.map is None or len(P) < c.solver.min_points:
+        c, solver = self.options, self.solver
+        if solver.map is None or len(P) < solver.config.solver.min_points:
             return None, "no map or too few points"
         if ref_rms is None:
             ref_rms = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
@@ -567,35 +565,35 @@ class Relocalizer:
         model = self._model_description()
         scan = describe(
             P,
-            c.reloc.descriptor,
-            c.reloc.radius * s0,
-            max_keypoints=c.reloc.max_scan_points,
+            c.descriptor,
+            c.radius * s0,
+            max_keypoints=c.max_scan_points,
             seed=frame,
         )
         cands = candidate_poses(
             scan,
             model,
-            tau=c.reloc.tau,
-            epsilon=c.reloc.epsilon * s0,
-            method=c.reloc.method,
-            n_candidates=c.reloc.candidates,
-            min_size=c.reloc.min_support,
+            tau=c.tau,
+            epsilon=c.epsilon * s0,
+            method=c.method,
+            n_candidates=c.candidates,
+            min_size=c.min_support,
         )
         if not cands:
             return None, "no consistent set of descriptor matches"
         rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1)))), s0)
-        gate = max(c.reloc.gate * s0, 2.0 * solver.map.voxel_size)
+        gate = max(c.gate * s0, 2.0 * solver.map.voxel_size)
         pred = solver.solve(P, T_pred, solver.weak_prior(T_pred), gate, rng, radius, primary=False)
-        limit = c.reloc.rms_ratio * ref_rms if np.isfinite(ref_rms) else c.reloc.rms_ratio
+        limit = c.rms_ratio * ref_rms if np.isfinite(ref_rms) else c.rms_ratio
         best: dict[str, Any] | None = None
         for T0, support in cands:
             fit = solver.solve(P, T0, solver.weak_prior(T0), gate, rng, radius, primary=False)
             ok = (
                 fit["usable"]
                 and np.all(np.isfinite(fit["T"]))
-                and fit["overlap"] >= c.solver.min_overlap
-                and fit["cond"] >= c.solver.min_degeneracy
+                and fit["overlap"] >= solver.config.solver.min_overlap
+                and fit["cond"] >= solver.config.solver.min_degeneracy
                 and fit["rms"] <= limit
                 and fit["fitness"] > pred["fitness"]
             )

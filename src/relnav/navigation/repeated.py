@@ -54,7 +54,7 @@ from scipy.spatial import cKDTree
 
 from relnav.geometry.kdtree import kd_build_select, kd_query
 from relnav.navigation.gicp import ScanToMapFit
-from relnav.navigation.options import NavigatorConfig
+from relnav.navigation.options import SolverOptions
 from relnav.navigation.voxel_map import VoxelMap, even_subset
 
 Register = Callable[..., ScanToMapFit]
@@ -75,9 +75,9 @@ class RepeatedPoints:
 
     Parameters
     ----------
-    config : NavigatorConfig
-        The navigator's options (``solver.repeat_refine``, ``solver.repeat_fraction``,
-        ``solver.repeat_max_points``, ``solver.min_points``).
+    options : SolverOptions
+        The navigator's ``solver`` options (``repeat_refine``, ``repeat_fraction``,
+        ``repeat_max_points``, ``min_points``).
 
     Attributes
     ----------
@@ -87,8 +87,8 @@ class RepeatedPoints:
         The frame's index, :meth:`set_scan`.
     """
 
-    def __init__(self, config: NavigatorConfig) -> None:
-        self.config = config
+    def __init__(self, options: SolverOptions) -> None:
+        self.options = options
         self.full_scan = np.zeros((0, 3))
         self.frame = 0
         self.same_rays = False
@@ -107,7 +107,7 @@ class RepeatedPoints:
         """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m);
         whether they repeat the previous scan's (see the module doc). Sets :attr:`same_rays`
         and :attr:`ray_fraction`; nothing is done with ``solver.repeat_refine`` off."""
-        if self.config.solver.repeat_refine <= 0:
+        if self.options.repeat_refine <= 0:
             return False
         u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
         self.same_rays = False
@@ -128,7 +128,7 @@ class RepeatedPoints:
     def should_test(self, frame: int) -> bool:
         """Whether to refine this frame (``solver.repeat_refine`` on, rays not repeated, not resting
         after ``PATIENCE`` misses unless the frame is a ``RETEST``-th)."""
-        if self.config.solver.repeat_refine <= 0 or self.same_rays:
+        if self.options.repeat_refine <= 0 or self.same_rays:
             return False
         return self.misses < PATIENCE or frame % RETEST == 0
 
@@ -170,12 +170,12 @@ class RepeatedPoints:
         repeated : bool
             Whether the point-to-point answer was kept.
         """
-        c = self.config
-        if not self.should_test(self.frame) or fit.n_pairs < c.solver.min_points:
+        c = self.options
+        if not self.should_test(self.frame) or fit.n_pairs < c.min_points:
             return fit, float("nan"), False
         full = self.full_scan  # repeated points are exact constraints: use them all,
-        if c.solver.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
-            full = even_subset(full, c.solver.repeat_max_points)
+        if c.repeat_max_points > 0:  # up to a cap (an even subset keeps exact repeats)
+            full = even_subset(full, c.repeat_max_points)
         trial, frac = self.refine(
             full if len(full) > len(P) else P,
             fit.T,
@@ -187,7 +187,7 @@ class RepeatedPoints:
             spacing0,
             register,
         )
-        repeated = frac >= c.solver.repeat_fraction
+        repeated = frac >= c.repeat_fraction
         if primary:
             self.misses = 0 if repeated else self.misses + 1
         return (trial if repeated else fit), frac, repeated
@@ -229,7 +229,7 @@ class RepeatedPoints:
         fraction : float
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
-        sig = self.config.solver.repeat_refine * spacing0
+        sig = self.options.repeat_refine * spacing0
         Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(voxel_map), 3, 3)))
         fit = register(P, Om, T0, T_pred, Lam, gate, rng)
         return fit, self.evidence(P, fit.T, sig, spacing0)
