@@ -6,11 +6,18 @@
 #      SHOT; the other four follow in the last phases);
 #   3. seeds 4 and 5 of the proposed pipeline and the competitors with the paper's settings;
 #   4. sim-eoi (3 100-point scans), HoD-S rows and the competitors, then everything.
-# The store is resumable: rerunning skips finished jobs. Usage:
+# The store is resumable: rerunning skips finished jobs; the committed store
+# (docs/results/paper1-full-length/store/) seeds a new OUT. Copy OUT/results.sqlite back there
+# after a part. Usage:
 #   nice -n 10 bash benchmarks/paper1/paper1_full_length.sh [OUT]   (default bench/paper1-full-length)
 set -u
 OUT=${1:-bench/paper1-full-length}
 GRID=configs/paper1-full-length.yaml
+# the store of the parts run so far is committed: a fresh clone resumes from it
+STORE=docs/results/paper1-full-length/store/results.sqlite
+if [ ! -e "$OUT/results.sqlite" ] && [ -e "$STORE" ]; then
+  mkdir -p "$OUT" && cp "$STORE" "$OUT/results.sqlite"
+fi
 CHEAP=(--scenario sim-bennu --scenario sim-voyager --scenario sim-orion --scenario sim-helical)
 PROPOSED=(-m 'feature:*+gcc+hinf' -m 'feature:*+gcc+kalman' -m 'feature:*+gcc+alphabeta'
           -m 'feature:*+gcc+sdre')
