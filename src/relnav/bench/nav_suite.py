@@ -383,11 +383,12 @@ def run_method(
         }
     if per_step:  # arrays (not JSON): each step's error, flag, own 1σ (m) and exceedance
         info = [s.result.info if s.result is not None else {} for s in run.steps[1:]]
+        sigma = run.step_sigma if run.step_sigma is not None else np.full((len(et) + 1, 2), np.nan)
         out["steps"] = {
             "wrong": wrong,
             "flagged": flagged,
             "error_t": et,
-            "sigma_t": np.array([i.get("step_sigma_t", np.nan) for i in info], dtype=float),
+            "sigma_t": sigma[1:, 0],
             "exceed": np.array([i.get("exceed_probability", np.nan) for i in info], dtype=float),
         }
     return out

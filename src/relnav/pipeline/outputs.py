@@ -48,12 +48,9 @@ def navigator_run(run: Any) -> bool:
     """Whether ``run`` (an :class:`relnav.odometry.OdometryRun`) is the navigator's: its method
     is a registered tracker built by :class:`relnav.navigation.Navigator` (or a subclass), whose
     run folder has the revisit counts and the relative state."""
-    from relnav.navigation.navigator import Navigator
-    from relnav.pipeline.registry import tracker_entry
+    from relnav.pipeline.registry import builds_navigator, tracker_entry
 
-    entry = tracker_entry(run.method) if isinstance(run.method, str) else None
-    factory = entry.factory if entry is not None else None
-    return isinstance(factory, type) and issubclass(factory, Navigator)
+    return builds_navigator(tracker_entry(run.method) if isinstance(run.method, str) else None)
 
 
 def _block_means(values: Any) -> dict[str, float | None]:
@@ -158,6 +155,7 @@ def write_run_outputs(
         np.savetxt(out / "times.txt", run.timestamps, fmt="%.9f")
         outputs += ["estimate_kitti.txt", "times.txt"]
     metrics: dict[str, Any] = {}
+    navigator = navigator_run(run)
     gt = getattr(seq, "gt_poses", None)  # a plain list of scans has none
     n = len(run.poses)
     if gt is not None and n >= 2:
@@ -178,7 +176,7 @@ def write_run_outputs(
                 k: v for k, v in causal.items() if isinstance(v, int | float) and k in metrics
             }
             metrics["causal"].pop("time_ms", None)  # the run's, not the trajectory's
-        if navigator_run(run):  # the navigator's revisit test: revisits tested, failed
+        if navigator:  # the navigator's revisit test: revisits tested, failed
             revisits = run.options.get("finalize", {}).get("revisits") or []
             metrics.update(
                 revisit_tests=len(revisits), revisit_alarms=sum(r["alarm"] for r in revisits)
@@ -201,7 +199,7 @@ def write_run_outputs(
             )
             outputs.append("errors.png")
     frames = state_steps if state_steps is not None else run.steps
-    if navigator_run(run) and len(frames) >= 3:
+    if navigator and len(frames) >= 3:
         gt_n = gt[:n] if gt is not None else None
         outputs += write_state_outputs(out, run, gt_n, metrics, steps=frames, options=state_options)
     if metrics:  # once, with the state's figures when there are some

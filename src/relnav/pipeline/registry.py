@@ -37,7 +37,13 @@ from relnav.errors import ConfigError
 from relnav.navigation.navigator import Navigator
 from relnav.odometry.tracker import CAPABILITIES, TrackerEntry
 
-__all__ = ["available_trackers", "register_tracker", "tracker_entry", "unregister_tracker"]
+__all__ = [
+    "available_trackers",
+    "builds_navigator",
+    "register_tracker",
+    "tracker_entry",
+    "unregister_tracker",
+]
 
 _TRACKERS: dict[str, TrackerEntry] = {}
 
@@ -109,6 +115,13 @@ def unregister_tracker(name: str) -> None:
 def tracker_entry(name: str) -> TrackerEntry | None:
     """The registered tracker named ``name`` (case-insensitive), or ``None``."""
     return _TRACKERS.get(str(name).strip().lower())
+
+
+def builds_navigator(entry: TrackerEntry | None) -> bool:
+    """Whether ``entry`` builds relnav's navigator (:class:`~relnav.navigation.Navigator` or a
+    subclass): its run folder has the revisit counts and the relative state."""
+    factory = entry.factory if entry is not None else None
+    return isinstance(factory, type) and issubclass(factory, Navigator)
 
 
 def available_trackers() -> dict[str, TrackerEntry]:

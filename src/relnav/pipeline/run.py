@@ -26,13 +26,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from relnav.navigation.navigator import Navigator
 from relnav.odometry.runner import OdometryRun
 from relnav.odometry.runner import make_tracker as _odometry_tracker
 from relnav.odometry.runner import run_sequence as _run_odometry
 from relnav.odometry.tracker import TrackerEntry
 from relnav.pipeline.outputs import PoseFormat, write_run_outputs
-from relnav.pipeline.registry import available_trackers, tracker_entry
+from relnav.pipeline.registry import available_trackers, builds_navigator, tracker_entry
 from relnav.scan import Scan
 
 __all__ = [
@@ -208,9 +207,7 @@ class OdometryPipeline:
     @property
     def is_navigator(self) -> bool:
         """Whether the method is the navigator (its run folder has the relative state)."""
-        entry = self.entry
-        factory = entry.factory if entry is not None else None
-        return isinstance(factory, type) and issubclass(factory, Navigator)
+        return builds_navigator(self.entry)
 
     @property
     def label(self) -> str:
