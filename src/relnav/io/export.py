@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from relnav.atomic import temp_name
 from relnav.errors import ConfigError, InputError
 
 __all__ = ["EXPORT_FORMATS", "export_kitti", "export_rosbag2", "export_sequence"]
@@ -67,7 +68,7 @@ def _finish(tmp: Path, out: Path) -> Path:
 
 
 def _tmp_dir(out: Path) -> Path:
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    tmp = temp_name(out)  # the project's temporary sibling (relnav.atomic)
     if tmp.exists():
         shutil.rmtree(tmp)
     out.parent.mkdir(parents=True, exist_ok=True)
