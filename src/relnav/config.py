@@ -17,6 +17,7 @@ __all__ = [
     "OPTION_RANGES",
     "StrictModel",
     "check_options",
+    "describe_range",
     "did_you_mean",
     "dump_yaml",
     "format_validation_error",
@@ -166,7 +167,8 @@ def _accepted(word: str, choices: Any) -> str:
     return f"{len(names)} options accepted, e.g. {', '.join(names[:DID_YOU_MEAN_N])}"
 
 
-def _describe_range(r: _Range) -> str:
+def describe_range(r: _Range) -> str:
+    """``">= 0 and <= 1"``: a range ``(low, low_inclusive, high, high_inclusive)`` in words."""
     lo, lo_inc, hi, hi_inc = r
     parts = []
     if lo is not None:
@@ -283,8 +285,7 @@ def check_options(
         r = OPTION_RANGES.get(key)
         if r is not None and not _in_range(float(value), r):
             raise ConfigError(
-                f"{where}: option {key}={options[key]!r} out of range "
-                f"(must be {_describe_range(r)})"
+                f"{where}: option {key}={options[key]!r} out of range (must be {describe_range(r)})"
             )
     return out
 

@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from pydantic import ConfigDict, Field, ValidationError, field_validator
 
-from relnav.config import StrictModel, did_you_mean, format_validation_error
+from relnav.config import StrictModel, describe_range, did_you_mean, format_validation_error
 from relnav.errors import ConfigError
 
 __all__ = [
@@ -719,14 +719,16 @@ def _one_line(err: ValidationError, where: str) -> str:
 
 
 def range_text(field: Any) -> str:
-    """``">= 0 and <= 1"`` from a field's bounds."""
-    parts = []
-    for m in field.metadata:
-        for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
-            bound = getattr(m, attr, None)
-            if bound is not None:
-                parts.append(f"{op} {bound:g}")
-    return " and ".join(parts)
+    """``">= 0 and <= 1"`` from a field's bounds (:func:`relnav.config.describe_range`)."""
+    bounds = {
+        attr: getattr(m, attr)
+        for m in field.metadata
+        for attr in ("gt", "ge", "lt", "le")
+        if getattr(m, attr, None) is not None
+    }
+    low = bounds.get("ge", bounds.get("gt"))
+    high = bounds.get("le", bounds.get("lt"))
+    return describe_range((low, "ge" in bounds, high, "le" in bounds))
 
 
 def loop_closer_options(c: NavigatorConfig) -> dict[str, Any]:
