@@ -72,3 +72,31 @@ def test_off_by_default_and_options_checked():
     assert all("stability_distance" not in s.result.info for s in steps)
     with pytest.raises(ConfigError):
         Navigator(**{"integrity.stability_check": True, "integrity.stability_gate": -1.0})
+
+
+def test_limits_flag_only_answers_apart_beyond_the_flag_limits():
+    opts = {"integrity.stability_check": True, "integrity.stability_flag": "limits"}
+    steps = _track(_cylinder, **opts)[1:]
+    apart = [s for s in steps if s.result.info.get("stability_apart")]
+    assert apart  # the cylinder's roll: the two answers differ by more than the gate (σ)
+    for s in apart:
+        info = s.result.info
+        within = (
+            info["stability_separation_m"] <= 0.5 and info["stability_separation_deg"] <= 5.0
+        )
+        assert within == (s.status != "degenerate")
+        if within:  # kept as ok, but the map is not fed a scan that may sit at the other answer
+            assert not info.get("merged")
+    # the same answers with flag limits below their separation are flagged
+    tight = {**opts, "integrity.flag_limit_t": 1e-4, "integrity.flag_limit_r_deg": 1e-4}
+    steps = _track(_cylinder, **tight)[1:]
+    assert all(s.status == "degenerate" for s in steps if s.result.info.get("stability_apart"))
+
+
+def test_check_when_jitter_waits_for_learned_jitter():
+    # six frames of a static sensor: no attitude jitter is learned, so the check never runs
+    opts = {"integrity.stability_check": True, "integrity.stability_when": "jitter"}
+    steps = _track(_cylinder, **opts)[1:]
+    assert all("stability_distance" not in s.result.info for s in steps)
+    with pytest.raises(ConfigError):
+        Navigator(**{"integrity.stability_when": "sometimes"})

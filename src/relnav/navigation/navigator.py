@@ -269,13 +269,16 @@ class Navigator:
             if self.config.prior.adaptive_noise:
                 self.motion.adapt(result.info["chi2_motion"])
             self.pose = self.motion.pose.copy()
-            ts = time.perf_counter()
-            Pm = even_subset(P, self.config.map.max_map_points)
-            self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
-            result.info["merged"] = True  # in the map, whatever label the integrity check adds
-            self.repeats.remember(self.repeats.full_scan, self.pose)
-            self._update_symmetry()
-            timings["map"] = time.perf_counter() - ts
+            # two answers apart but within the flag limits: the pose is kept, the map is not
+            # fed a scan that may sit at the other answer
+            if not result.info.get("stability_apart"):
+                ts = time.perf_counter()
+                Pm = even_subset(P, self.config.map.max_map_points)
+                self.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
+                result.info["merged"] = True  # in the map, whatever label integrity adds
+                self.repeats.remember(self.repeats.full_scan, self.pose)
+                self._update_symmetry()
+                timings["map"] = time.perf_counter() - ts
         else:
             self.motion.skip()
             self.pose = self.motion.pose.copy()
@@ -585,7 +588,14 @@ class Navigator:
                 Lam = weak
         timings["register"] = time.perf_counter() - ts
         unstable = False
-        if c.integrity.stability_check and fit["usable"]:
+        if (
+            c.integrity.stability_check
+            and fit["usable"]
+            and (
+                c.integrity.stability_when == "always"
+                or sj >= math.radians(c.prior.jitter_start_min_deg)
+            )
+        ):
             ts = time.perf_counter()
             Lam_s = Lam if recovered else Lam_fit
             fit, unstable = solver.stability(P, fit, T_pred, Lam_s, gate, rng, radius, info)

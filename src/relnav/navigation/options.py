@@ -346,6 +346,16 @@ class IntegrityOptions(_Section):
     stability_mode: Literal["start", "prior"] = Field(
         "start", description="Displace the start only, or the prior too."
     )
+    stability_flag: Literal["sigma", "limits"] = Field(
+        "sigma",
+        description="Unstable when the answers are over stability_gate σ apart, or only when "
+        "they are also farther apart than the flag limits.",
+    )
+    stability_when: Literal["always", "jitter"] = Field(
+        "always",
+        description="Check every step, or only while the learned attitude jitter is at least "
+        "prior.jitter_start_min_deg.",
+    )
 
 
 class RelocOptions(_Section):

@@ -169,9 +169,21 @@ class MapSolver:
             stability_shift=d.copy(),
             stability_rms=rms_alt,
         )
-        unstable = dist > c.integrity.stability_gate
-        if unstable and rms_alt < fit["rms"]:
+        # how far apart the two answers put the sensor (m) and turn it (deg)
+        D = exp_se3(d)
+        sep_t = float(np.linalg.norm(D[:3, :3] @ fit["T"][:3, 3] + D[:3, 3] - fit["T"][:3, 3]))
+        sep_r = math.degrees(float(np.linalg.norm(d[3:])))
+        apart = dist > c.integrity.stability_gate
+        info.update(
+            stability_separation_m=sep_t, stability_separation_deg=sep_r, stability_apart=apart
+        )
+        if apart and rms_alt < fit["rms"]:
             fit = dict(fit, T=alt.T, rms=rms_alt)
+        unstable = apart
+        if c.integrity.stability_flag == "limits":
+            unstable = apart and (
+                sep_t > c.integrity.flag_limit_t or sep_r > c.integrity.flag_limit_r_deg
+            )
         return fit, unstable
 
     def weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
