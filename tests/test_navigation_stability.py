@@ -81,9 +81,7 @@ def test_limits_flag_only_answers_apart_beyond_the_flag_limits():
     assert apart  # the cylinder's roll: the two answers differ by more than the gate (σ)
     for s in apart:
         info = s.result.info
-        within = (
-            info["stability_separation_m"] <= 0.5 and info["stability_separation_deg"] <= 5.0
-        )
+        within = info["stability_separation_m"] <= 0.5 and info["stability_separation_deg"] <= 5.0
         assert within == (s.status != "degenerate")
         if within:  # kept as ok, but the map is not fed a scan that may sit at the other answer
             assert not info.get("merged")
