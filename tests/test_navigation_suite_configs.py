@@ -64,6 +64,7 @@ EXPECTED = {
         "comet-tumble-64",
         "probe-tumble-64",
     ],
+    "jitter-holdout": ["aura-jitter1", "aura-jitter2", "eros-jitter2", "voyager-walk1"],
 }
 
 
@@ -74,6 +75,8 @@ def test_groups_list_the_expected_sequences_in_order():
     assert list(nav_suite.holdout()) == EXPECTED["holdout"]
     assert list(nav_suite.stress()) == EXPECTED["stress"]
     assert list(nav_suite.tumbling_holdout()) == EXPECTED["tumbling-holdout"]
+    assert list(nav_suite.jitter_holdout()) == EXPECTED["jitter-holdout"]
+    assert nav_suite.sequence_names(jittered=True) == EXPECTED["jitter-holdout"]
 
 
 def test_every_scenario_file_is_valid_and_in_exactly_one_group():

@@ -46,6 +46,7 @@ __all__ = [
     "configs_dir",
     "group",
     "holdout",
+    "jitter_holdout",
     "judge_steps",
     "markdown_table",
     "paper",
@@ -79,7 +80,7 @@ PEERS = [
 DEFAULT_METHODS = ["relnav", *PEERS, "icp-plane"]
 WARM_UP_FRAMES = 12
 
-GROUPS = ("suite", "holdout", "stress", "tumbling-holdout")
+GROUPS = ("suite", "holdout", "stress", "tumbling-holdout", "jitter-holdout")
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
 
 JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
@@ -213,6 +214,12 @@ def tumbling_holdout() -> dict[str, dict[str, Any]]:
     return group("tumbling-holdout")
 
 
+def jitter_holdout() -> dict[str, dict[str, Any]]:
+    """Attitude jitter on targets the stress group's jitter levels were not measured on, made
+    after the navigator's parameters were frozen (``configs/nav-jitter-holdout.yaml``)."""
+    return group("jitter-holdout")
+
+
 def paper(max_frames: int | None = None) -> dict[str, dict[str, Any]]:
     """Paper 1's presets of the suite's grid, by label, each its first ``max_frames`` frames
     (default: the grid's): with paper 1's data generation (one model cloud) and with fresh
@@ -233,11 +240,21 @@ def paper(max_frames: int | None = None) -> dict[str, dict[str, Any]]:
     return {k: out[k] for k in order}
 
 
-def sequence_names(held_out: bool = False, only: str = "", stressed: bool = False) -> list[str]:
+def sequence_names(
+    held_out: bool = False, only: str = "", stressed: bool = False, jittered: bool = False
+) -> list[str]:
     """The suite's sequences with the paper presets, or the held-out ones, or the stress group
-    (:func:`stress`); ``only``: keep the names containing one of its comma-separated
-    substrings."""
-    pool = stress() if stressed else holdout() if held_out else {**suite(), **paper()}
+    (:func:`stress`), or the jitter hold-out (:func:`jitter_holdout`); ``only``: keep the names
+    containing one of its comma-separated substrings."""
+    pool = (
+        jitter_holdout()
+        if jittered
+        else stress()
+        if stressed
+        else holdout()
+        if held_out
+        else {**suite(), **paper()}
+    )
     return [n for n in pool if not only or any(s in n for s in only.split(","))]
 
 
@@ -254,6 +271,12 @@ def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
         "--stress",
         action="store_true",
         help="the stress group (attitude jitter, sparse scans, far start-up) instead",
+    )
+    p.add_argument(
+        "--jitter-holdout",
+        action="store_true",
+        help="attitude jitter on targets the stress group does not have, made after the "
+        "parameters were frozen",
     )
     p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
