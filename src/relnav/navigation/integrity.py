@@ -6,16 +6,18 @@ disagree, which that covariance (theirs) cannot show."""
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
+import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from relnav.geometry.rotations import rotation_angle
 from relnav.registration.result import RegistrationResult
 
 if TYPE_CHECKING:
     from relnav.navigation.options import NavigatorConfig
 
-__all__ = ["disagreement", "exceedance_probability"]
+__all__ = ["ambiguity", "disagreement", "exceedance_probability"]
 
 
 @functools.cache
@@ -60,12 +62,62 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
     return float(np.mean(out))
 
 
+def ambiguity(
+    best: dict[str, Any], answers: list[dict[str, Any]], c: NavigatorConfig
+) -> dict[str, float]:
+    """The other registration answer (of the extra starts under jitter) that fits the scan
+    almost as well as the chosen one and lies farthest from it beyond the flag limits.
+
+    **[interpretation]** Solution separation: when two starts end at answers whose robust RMS
+    differ by at most ``integrity.ambiguity_rms`` (a ratio) and whose sensor poses are farther
+    apart than ``integrity.flag_limit_t`` or ``integrity.flag_limit_r_deg``, the scan does not
+    tell which one is right at the flag limits, whatever the chosen answer's covariance says.
+
+    Parameters
+    ----------
+    best : dict
+        The chosen answer (``"T"`` (4, 4) target-from-sensor, ``"rms"``, ``"usable"``).
+    answers : list of dict
+        Every answer, the chosen one included.
+    c : NavigatorConfig
+
+    Returns
+    -------
+    dict
+        ``{"ambiguity_t": m, "ambiguity_r_deg": deg, "ambiguity_rms_ratio": ratio}`` of that
+        answer, or ``{}`` when there is none.
+    """
+    ig = c.integrity
+    out: dict[str, float] = {}
+    far = 0.0
+    for a in answers:
+        if a is best or not a["usable"] or not a["rms"] <= ig.ambiguity_rms * best["rms"]:
+            continue
+        d_t = float(np.linalg.norm(a["T"][:3, 3] - best["T"][:3, 3]))
+        d_r = math.degrees(rotation_angle(a["T"][:3, :3].T @ best["T"][:3, :3]))
+        excess = max(d_t / ig.flag_limit_t, d_r / ig.flag_limit_r_deg)
+        if excess > 1.0 and excess > far:
+            far = excess
+            out = {
+                "ambiguity_t": d_t,
+                "ambiguity_r_deg": d_r,
+                "ambiguity_rms_ratio": float(a["rms"] / best["rms"]),
+            }
+    return out
+
+
 def disagreement(result: RegistrationResult, c: NavigatorConfig) -> str:
     """Why an accepted step's motion model and scan disagree beyond what its covariance can
     say (``integrity.flag_chi2``, ``integrity.flag_min_fitness``,
     ``integrity.flag_recovered``), or ``""``."""
     info, ig = result.info, c.integrity
     chi2 = float(info.get("chi2_motion", 0.0))
+    if "ambiguity_t" in info:
+        return (
+            f"ambiguous: another start fits the scan within "
+            f"{info['ambiguity_rms_ratio'] - 1.0:.1%} of the RMS {info['ambiguity_t']:.2f} m / "
+            f"{info['ambiguity_r_deg']:.1f}° away"
+        )
     if ig.flag_recovered and info.get("recovered"):
         return "the motion model's prior was rejected: registered again under the weak prior"
     if ig.flag_chi2 > 0 and chi2 > ig.flag_chi2:

@@ -47,7 +47,7 @@ from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation.attitude_input import AttitudeInput, aided_prediction
 from relnav.navigation.gicp import left_information
-from relnav.navigation.integrity import disagreement, exceedance_probability
+from relnav.navigation.integrity import ambiguity, disagreement, exceedance_probability
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.multistart import rotated_starts
 from relnav.navigation.options import (
@@ -566,11 +566,15 @@ class Navigator:
             and c.prior.jitter_starts > 0
             and sj >= math.radians(c.prior.jitter_start_min_deg)
         ):
+            answers = [fit]
             for T0 in rotated_starts(
                 T_pred, sj, c.prior.jitter_starts
             ):  # other minima in the jitter
                 alt = solver.solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
+                answers.append(alt)
                 fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
+            if c.integrity.ambiguity_rms > 0:
+                info.update(ambiguity(fit, answers, c))
         recovered = False
         if fit["chi2"] > c.solver.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an

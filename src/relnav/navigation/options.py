@@ -320,6 +320,12 @@ class IntegrityOptions(_Section):
         0.8, ge=0, le=1, description="Flag a step whose fitness is below this."
     )
     flag_recovered: bool = Field(True, description="Flag a step kept under the weak prior.")
+    ambiguity_rms: float = Field(
+        0.0,
+        ge=0,
+        description="Flag a step when another start's answer fits within this RMS ratio and "
+        "lies beyond the flag limits (e.g. 1.02; 0: off).",
+    )
     flag_after_frames: int = Field(
         10,
         ge=0,
