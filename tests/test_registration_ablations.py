@@ -147,14 +147,21 @@ def _corr_problem(seed: int, n: int = 150, outliers: int = 0, noise: float = 0.0
     return src, tgt, corr, T
 
 
+RELNAV_READING = {"init": "kabsch", "thresholds": "scale"}
+"""relnav's reading of Table 3's ICP (docs/paper1-deviations.md row 27a); the default is the
+paper's: from the identity, with its absolute thresholds."""
+
+
 def test_icp_estimator_registered_with_options():
     est = get_estimator("icp")
     assert isinstance(est, icp_refine.ICPRefineEstimator)
-    assert est.name == "icp" and est.mode == "subset" and est.init == "kabsch"
+    assert est.name == "icp" and est.mode == "subset"
+    assert est.init == "identity" and est.thresholds == "paper"  # as the paper's Section 3 ICP
     assert est.max_iter == 20  # Paper 1's ICP iterations
     for bad in (
         {"mode": "x"},
         {"init": "x"},
+        {"thresholds": "x"},
         {"max_iter": 0},
         {"min_correspondences": 2},
         {"y": 1},
@@ -163,7 +170,9 @@ def test_icp_estimator_registered_with_options():
             get_estimator("icp", **bad)
 
 
-@pytest.mark.parametrize("options", [{}, {"init": "identity"}, {"mode": "trimmed"}])
+@pytest.mark.parametrize(
+    "options", [RELNAV_READING, {"init": "identity", "thresholds": "scale"}, {"mode": "trimmed"}]
+)
 def test_icp_estimator_exact_correspondences(options):
     src, tgt, corr, T = _corr_problem(1)
     e = get_estimator("icp", **options).estimate(src, tgt, corr)
@@ -195,7 +204,7 @@ def test_icp_estimator_subset_ignores_wrong_pairings():
     the right points do not bias it (they do bias plain Kabsch)."""
     src, tgt, corr, T = _corr_problem(2, outliers=15, noise=0.002)
     svd = get_estimator("svd").estimate(src, tgt, corr)
-    subset = get_estimator("icp").estimate(src, tgt, corr)
+    subset = get_estimator("icp", **RELNAV_READING).estimate(src, tgt, corr)
     assert point_error(svd.T_target_source, T, src) > 0.02
     assert point_error(subset.T_target_source, T, src) < 0.005
     assert subset.covariance is not None and subset.covariance.shape == (6, 6)
@@ -211,15 +220,37 @@ def test_icp_estimator_identity_init_fails_on_large_motion_kabsch_init_does_not(
     T[:3, 3] = [20.0, 0.0, 0.0] - T[:3, :3] @ [20.0, 0.0, 0.0]  # about the target centre
     tgt = transform_points(T, src)
     corr = Correspondences(np.arange(300), np.arange(300), np.zeros(300))
-    good = get_estimator("icp").estimate(src, tgt, corr)
-    lit = get_estimator("icp", init="identity").estimate(src, tgt, corr)
+    good = get_estimator("icp", **RELNAV_READING).estimate(src, tgt, corr)
+    lit = get_estimator("icp", init="identity", thresholds="scale").estimate(src, tgt, corr)
     assert point_error(good.T_target_source, T, src) < 1e-6
     assert point_error(lit.T_target_source, T, src) > 0.5
 
 
+def test_icp_estimator_default_is_the_papers_icp():
+    """From the identity with the paper's 0.01 gate: a motion of centimetres is followed, one
+    of decimetres leaves no pair within the gate and the step is flagged (Table 3's failures);
+    relnav's reading follows both."""
+    rng = np.random.default_rng(7)
+    src = _bumpy(300, rng)
+    corr = Correspondences(np.arange(300), np.arange(300), np.zeros(300))
+    for shift, paper_ok in ((0.004, True), (0.3, False)):
+        T = np.eye(4)
+        T[:3, 3] = [shift, 0.0, 0.0]
+        tgt = transform_points(T, src)
+        paper = get_estimator("icp").estimate(src, tgt, corr)
+        assert paper.info["init"] == "identity" and paper.info["thresholds"] == "paper"
+        assert (paper.status == "ok") is paper_ok
+        if paper_ok:
+            assert point_error(paper.T_target_source, T, src) < 1e-3
+        else:
+            np.testing.assert_array_equal(paper.T_target_source, np.eye(4))
+        ours = get_estimator("icp", **RELNAV_READING).estimate(src, tgt, corr)
+        assert ours.status == "ok" and point_error(ours.T_target_source, T, src) < 1e-6
+
+
 def test_icp_estimator_small_subset_falls_back_to_kabsch():
     src, tgt, corr, T = _corr_problem(4, n=5)
-    e = get_estimator("icp").estimate(src, tgt, corr)
+    e = get_estimator("icp", **RELNAV_READING).estimate(src, tgt, corr)
     assert e.status == "ok" and e.info["refined"] is False and e.info["icp_message"]
     np.testing.assert_allclose(e.T_target_source, T, atol=1e-8)
     lit = get_estimator("icp", init="identity").estimate(src, tgt, corr)
@@ -244,7 +275,7 @@ def test_icp_estimator_degenerate_inputs_are_flagged():
 
 def test_feature_gcc_icp_pipeline(pair):
     src, tgt, T_true = pair
-    reg = get_registration("feature:fpfh+gcc+icp")
+    reg = get_registration("feature:fpfh+gcc+icp", estimator_options=RELNAV_READING)
     r = reg.register(src, tgt)
     assert r.ok, r.message
     assert r.info["mode"] == "subset" and r.info["refined"] is True

@@ -69,6 +69,8 @@ LEDGER = {
     "ledger:uncentred": "αβ on raw (uncentred) coordinates",
     "ledger:frobenius": "αβ: Frobenius projection to SO(3)",
     "ledger:prior-identity": "identity instead of constant velocity for failed steps",
+    "ledger:icp-relnav": "Table 3's ICP from the pairs' Kabsch fit, scale-aware gate "
+    "(HoD-S/GCC/ICP, not αβ: compare with Table 3's HoD-S row)",
 }
 
 
