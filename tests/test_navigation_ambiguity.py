@@ -57,7 +57,8 @@ def test_worse_near_or_unusable_answers_are_not(other):
     )
 
 
-def test_off_by_default_and_checked():
-    assert navigator_config({}).integrity.ambiguity_rms == 0.0
+def test_on_by_default_and_checked():
+    assert navigator_config({}).integrity.ambiguity_rms == 1.02
+    assert navigator_config({"integrity.ambiguity_rms": 0}).integrity.ambiguity_rms == 0.0
     with pytest.raises(ConfigError):
         navigator_config({"integrity.ambiguity_rms": -1.0})

@@ -321,10 +321,10 @@ class IntegrityOptions(_Section):
     )
     flag_recovered: bool = Field(True, description="Flag a step kept under the weak prior.")
     ambiguity_rms: float = Field(
-        0.0,
+        1.02,
         ge=0,
         description="Flag a step when another start's answer fits within this RMS ratio and "
-        "lies beyond the flag limits (e.g. 1.02; 0: off).",
+        "lies beyond the flag limits (0: off).",
     )
     flag_after_frames: int = Field(
         10,
