@@ -80,6 +80,7 @@ def ambiguity(
     answers : list of dict
         Every answer, the chosen one included.
     c : NavigatorConfig
+        The navigator's options (``integrity``: the ratio and the flag limits).
 
     Returns
     -------
@@ -108,8 +109,9 @@ def ambiguity(
 
 def disagreement(result: RegistrationResult, c: NavigatorConfig) -> str:
     """Why an accepted step's motion model and scan disagree beyond what its covariance can
-    say (``integrity.flag_chi2``, ``integrity.flag_min_fitness``,
-    ``integrity.flag_recovered``), or ``""``."""
+    say (another answer as good beyond the flag limits: :func:`ambiguity`,
+    ``integrity.flag_recovered``, ``integrity.flag_chi2``, ``integrity.flag_min_fitness``), or
+    ``""``."""
     info, ig = result.info, c.integrity
     chi2 = float(info.get("chi2_motion", 0.0))
     if "ambiguity_t" in info:

@@ -125,8 +125,10 @@ class MapSolver:
         ``integrity.stability_cap`` map voxels (metres of translation, or of arc at ``radius``). The
         second answer goes through the same point-to-point refinement on repeated points as the
         first. The answers' distance is measured in the same information (σ). Returns the
-        better-fitting answer (lower robust RMS, the first on ties) and whether the distance exceeds
-        ``integrity.stability_gate``.
+        better-fitting answer (lower robust RMS, the first on ties) and whether the step is
+        unstable: the distance exceeds ``integrity.stability_gate`` (``stability_apart``) and,
+        with ``integrity.stability_flag="limits"``, the two answers' sensor poses are also farther
+        apart than the flag limits (``stability_separation_m``, ``stability_separation_deg``).
         """
         c = self.config
         assert self.map is not None
