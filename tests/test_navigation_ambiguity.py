@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from relnav.errors import ConfigError
+from relnav.geometry.rotations import rotvec_to_matrix
 from relnav.navigation.integrity import ambiguity, disagreement
 from relnav.navigation.options import navigator_config
 from relnav.registration.result import RegistrationResult
 
 
 def _answer(t=(0.0, 0.0, 0.0), yaw_deg: float = 0.0, rms: float = 1.0, usable: bool = True):
-    a = math.radians(yaw_deg)
     T = np.eye(4)
-    T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0, 0, 1]]
+    T[:3, :3] = rotvec_to_matrix(np.array([0.0, 0.0, math.radians(yaw_deg)]))
     T[:3, 3] = t
     return {"T": T, "rms": rms, "usable": usable}
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from relnav.geometry.rotations import rotation_angle
+from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
 if TYPE_CHECKING:
@@ -94,8 +94,8 @@ def ambiguity(
     for a in answers:
         if a is best or not a["usable"] or not a["rms"] <= ig.ambiguity_rms * best["rms"]:
             continue
-        d_t = float(np.linalg.norm(a["T"][:3, 3] - best["T"][:3, 3]))
-        d_r = math.degrees(rotation_angle(a["T"][:3, :3].T @ best["T"][:3, :3]))
+        angle, d_t = step_difference(best["T"], a["T"])
+        d_r = math.degrees(angle)
         excess = max(d_t / ig.flag_limit_t, d_r / ig.flag_limit_r_deg)
         if excess > 1.0 and excess > far:
             far = excess

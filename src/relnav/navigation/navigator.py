@@ -561,11 +561,8 @@ class Navigator:
         solver = self.solver
         fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         sj = math.sqrt(self.motion.jitter_var) if self.symmetry is None else 0.0  # flat axis
-        if (
-            fit["usable"]
-            and c.prior.jitter_starts > 0
-            and sj >= math.radians(c.prior.jitter_start_min_deg)
-        ):
+        jittering = sj >= math.radians(c.prior.jitter_start_min_deg)
+        if fit["usable"] and c.prior.jitter_starts > 0 and jittering:
             answers = [fit]
             for T0 in rotated_starts(
                 T_pred, sj, c.prior.jitter_starts
@@ -595,10 +592,7 @@ class Navigator:
         if (
             c.integrity.stability_check
             and fit["usable"]
-            and (
-                c.integrity.stability_when == "always"
-                or sj >= math.radians(c.prior.jitter_start_min_deg)
-            )
+            and (c.integrity.stability_when == "always" or jittering)
         ):
             ts = time.perf_counter()
             Lam_s = Lam if recovered else Lam_fit

@@ -29,6 +29,7 @@ from relnav.navigation.gicp import (
 from relnav.navigation.options import NavigatorConfig
 from relnav.navigation.repeated import RepeatedPoints
 from relnav.navigation.voxel_map import VoxelMap
+from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
 __all__ = ["MapSolver", "point_spacing", "rms_radius"]
@@ -172,9 +173,8 @@ class MapSolver:
             stability_rms=rms_alt,
         )
         # how far apart the two answers put the sensor (m) and turn it (deg)
-        D = exp_se3(d)
-        sep_t = float(np.linalg.norm(D[:3, :3] @ fit["T"][:3, 3] + D[:3, 3] - fit["T"][:3, 3]))
-        sep_r = math.degrees(float(np.linalg.norm(d[3:])))
+        angle, sep_t = step_difference(fit["T"], alt.T)
+        sep_r = math.degrees(angle)
         apart = dist > c.integrity.stability_gate
         info.update(
             stability_separation_m=sep_t, stability_separation_deg=sep_r, stability_apart=apart
