@@ -32,10 +32,11 @@ from typing import Any
 
 from relnav.bench.nav_suite import (
     DEFAULT_METHODS,
-    PEERS,
     add_sequence_arguments,
     markdown_table,
+    relnav_ratios,
     run_method,
+    scorecard_table,
     sequence_names,
     simulate_suite,
     stress_table,
@@ -55,8 +56,19 @@ def main(argv: list[str] | None = None) -> int:
         metavar=("PLAIN_JSON", "ATTITUDE_JSON"),
         help="print the stress group's table from two --json files and exit",
     )
+    p.add_argument(
+        "--scorecard",
+        nargs="+",
+        type=Path,
+        metavar="JSON",
+        help="print relnav against its targets (TARGETS) on each sequence of --json files and exit",
+    )
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if a.scorecard:
+        for f in a.scorecard:
+            print(f"{f}:\n\n{scorecard_table(json.loads(f.read_text()))}\n")
+        return 0
     if a.stress_table:
         plain, aided = (json.loads(f.read_text()) for f in a.stress_table)
         print(stress_table(plain, aided))
@@ -88,19 +100,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"{r['right_flagged']:3d})  {r['ms']:6.2f} ms",
                 flush=True,
             )
-        peers = {m: r for m, r in results[name].items() if m in PEERS and "error" not in r}
-        own = results[name].get("relnav", {})
-        if peers and "ape" in own:
-            best_ape = min(r["ape"] for r in peers.values())
-            best_rpe = min(r["rpe_t"] for r in peers.values())
-            best_rpr = min(r["rpe_r"] for r in peers.values())
-            kiss = peers.get("kiss-icp", {}).get("ms", float("nan"))
-            kiss_run = peers.get("kiss-icp", {}).get("wall_s", float("nan"))
+        q = relnav_ratios(results[name])
+        if q is not None:
             print(
-                f"{name:22s} relnav / best peer: APE {own['ape'] / best_ape:.2f}  "
-                f"RPE_t {own['rpe_t'] / best_rpe:.2f}  RPE_r {own['rpe_r'] / best_rpr:.2f}  "
-                f"time / kiss-icp {own['ms'] / kiss:.2f} "
-                f"(whole run {own['wall_s'] / kiss_run:.2f})",
+                f"{name:22s} relnav / best peer: APE {q['ape']:.2f}  RPE_t {q['rpe_t']:.2f}  "
+                f"RPE_r {q['rpe_r']:.2f}  time / kiss-icp {q['time']:.2f} "
+                f"(whole run {q['run_time']:.2f})",
                 flush=True,
             )
     if a.json:

@@ -40,6 +40,7 @@ __all__ = [
     "MISSION",
     "PAPER_PRESETS",
     "PEERS",
+    "TARGETS",
     "WARM_UP_FRAMES",
     "add_sequence_arguments",
     "attitude_input",
@@ -55,6 +56,9 @@ __all__ = [
     "simulate_suite",
     "step_errors",
     "stress",
+    "relnav_ratios",
+    "scorecard",
+    "scorecard_table",
     "stress_table",
     "suite",
     "tumbling_holdout",
@@ -417,6 +421,37 @@ def run_method(
     return out
 
 
+TARGETS: dict[str, float] = {
+    "ratio": 0.7,
+    "wrong_flagged": 0.9,
+    "right_flagged": 0.05,
+    "time": 1.5,
+}
+"""The navigator's targets on every sequence (:func:`scorecard`): APE, RPE_t and RPE_r at most
+``ratio`` × the best peer's (each metric's best, every peer causal), at least ``wrong_flagged``
+of its wrong steps flagged and at most ``right_flagged`` of its right steps, median time per frame
+at most ``time`` × KISS-ICP's in the same run."""
+
+
+def relnav_ratios(res: dict[str, Any]) -> dict[str, Any] | None:
+    """relnav's result on one sequence over the peers' (``res``: method → :func:`run_method`'s
+    dict): ``ape``, ``rpe_t``, ``rpe_r`` over each metric's best peer, ``time`` and ``run_time``
+    (median per frame and whole run over KISS-ICP's), ``best`` (the peer with the best APE);
+    ``None`` without relnav or a peer."""
+    r = res.get("relnav", {})
+    peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
+    if "ape" not in r or not peers:
+        return None
+    kiss = peers.get("kiss-icp", {})
+    out: dict[str, Any] = {
+        m: r[m] / min(p[m] for p in peers.values()) for m in ("ape", "rpe_t", "rpe_r")
+    }
+    out["time"] = r["ms"] / kiss.get("ms", math.nan)
+    out["run_time"] = r["wall_s"] / kiss.get("wall_s", math.nan)
+    out["best"] = min(peers, key=lambda m: peers[m]["ape"])
+    return out
+
+
 def markdown_table(results: dict[str, dict[str, Any]]) -> str:
     """The README's table: relnav (causal; its smoothed APE beside, as what it is) beside the
     best peer per sequence (every peer is causal), with the ratios."""
@@ -428,24 +463,73 @@ def markdown_table(results: dict[str, dict[str, Any]]) -> str:
     )
     rows = []
     for seq, res in results.items():
-        r = res.get("relnav", {})
-        peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
-        if "ape" not in r or not peers:
+        q = relnav_ratios(res)
+        if q is None:
             continue
-        best = min(peers, key=lambda m: peers[m]["ape"])
-        bt = min(p["rpe_t"] for p in peers.values())
-        br = min(p["rpe_r"] for p in peers.values())
-        kiss = peers.get("kiss-icp", {}).get("ms", float("nan"))
-        kiss_run = peers.get("kiss-icp", {}).get("wall_s", float("nan"))
+        r, best = res["relnav"], q["best"]
         sm = r.get("smoothed", {}).get("ape", float("nan"))
         rows.append(
             f"| {seq} | {r['ape']:.2f} | {r['rpe_t']:.3f} / {r['rpe_r']:.2f} | "
             f"{r['wrong']}/{r['n_steps']} ({r['wrong_flagged']}) | {sm:.2f} | {r['ms']:.1f} | "
-            f"{peers[best]['ape']:.2f} ({best}) | "
-            f"{bt:.3f} / {br:.2f} | {r['ape'] / peers[best]['ape']:.2f}, {r['rpe_t'] / bt:.2f}, "
-            f"{r['rpe_r'] / br:.2f} | {r['ms'] / kiss:.2f}, {r['wall_s'] / kiss_run:.2f} |"
+            f"{res[best]['ape']:.2f} ({best}) | "
+            f"{r['rpe_t'] / q['rpe_t']:.3f} / {r['rpe_r'] / q['rpe_r']:.2f} | {q['ape']:.2f}, "
+            f"{q['rpe_t']:.2f}, {q['rpe_r']:.2f} | {q['time']:.2f}, {q['run_time']:.2f} |"
         )
     return head + "\n".join(rows)
+
+
+def scorecard(results: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """relnav against :data:`TARGETS` on each sequence of ``results`` (``nav_suite.py --json``).
+
+    Returns
+    -------
+    list of dict
+        Per sequence: ``sequence``, the ratios of :func:`relnav_ratios`, ``wrong`` and
+        ``right`` (step counts), ``wrong_flagged`` and ``right_flagged`` (fractions; NaN when
+        there is no such step) and ``misses``, the targets it misses (a list of names among
+        ``ape``, ``rpe_t``, ``rpe_r``, ``wrong_flagged``, ``right_flagged``, ``time``).
+    """
+    rows = []
+    for seq, res in results.items():
+        q = relnav_ratios(res)
+        if q is None:
+            continue
+        r = res["relnav"]
+        wrong, right = int(r["wrong"]), int(r["n_steps"]) - int(r["wrong"])
+        row = {"sequence": seq, **q, "wrong": wrong, "right": right}
+        row["wrong_flagged"] = r["wrong_flagged"] / wrong if wrong else math.nan
+        row["right_flagged"] = r["right_flagged"] / right if right else math.nan
+        misses = [m for m in ("ape", "rpe_t", "rpe_r") if not q[m] <= TARGETS["ratio"]]
+        if wrong and not row["wrong_flagged"] >= TARGETS["wrong_flagged"]:
+            misses.append("wrong_flagged")
+        if right and not row["right_flagged"] <= TARGETS["right_flagged"]:
+            misses.append("right_flagged")
+        if not q["time"] <= TARGETS["time"]:
+            misses.append("time")
+        row["misses"] = misses
+        rows.append(row)
+    return rows
+
+
+def scorecard_table(results: dict[str, dict[str, Any]]) -> str:
+    """:func:`scorecard` as a markdown table, each missed target in bold."""
+
+    def cell(row: dict[str, Any], key: str, text: str) -> str:
+        return f"**{text}**" if key in row["misses"] else text
+
+    lines = [
+        "| sequence | ÷ best peer: APE | RPE_t | RPE_r | wrong steps flagged | right steps "
+        "flagged | ÷ KISS-ICP time | misses |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row in scorecard(results):
+        wf = f"{row['wrong_flagged']:.0%} of {row['wrong']}" if row["wrong"] else "no wrong step"
+        rf = f"{row['right_flagged']:.1%} of {row['right']}"
+        cells = [cell(row, m, f"{row[m]:.2f}") for m in ("ape", "rpe_t", "rpe_r")]
+        cells += [cell(row, "wrong_flagged", wf), cell(row, "right_flagged", rf)]
+        cells += [cell(row, "time", f"{row['time']:.2f}"), ", ".join(row["misses"]) or "none"]
+        lines.append(f"| {row['sequence']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def stress_table(plain: dict[str, Any], aided: dict[str, Any]) -> str:
