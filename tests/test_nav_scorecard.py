@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from relnav.bench.nav_suite import TARGETS, relnav_ratios, scorecard, scorecard_table
 
 
@@ -52,9 +54,31 @@ def test_a_sequence_without_relnav_or_peers_is_left_out_and_no_wrong_step_is_no_
         "peers only": {"kiss-icp": _result(1.0, 0.1, 0.1, 1.0)},
         "relnav only": {"relnav": _result(1.0, 0.1, 0.1, 1.0)},
         "clean": {"relnav": _result(0.1, 0.01, 0.01, 1.0), "kiss-icp": _result(1, 1, 1, 1.0)},
+        "lost": {"relnav": _result(9, 9, 9, 1.0, wrong=100), "kiss-icp": _result(9, 9, 9, 1.0)},
     }
     assert relnav_ratios(results["peers only"]) is None
     rows = scorecard(results)
-    assert [r["sequence"] for r in rows] == ["clean"]
+    assert [r["sequence"] for r in rows] == ["clean", "lost"]
     assert math.isnan(rows[0]["wrong_flagged"]) and rows[0]["misses"] == []
-    assert "no wrong step" in scorecard_table(results)
+    assert math.isnan(rows[1]["right_flagged"])
+    assert rows[1]["misses"] == ["ape", "rpe_t", "rpe_r", "wrong_flagged"]
+    table = scorecard_table(results)
+    assert "no wrong step" in table and "no right step" in table
+
+
+def test_run_method_returns_each_steps_evidence_beside_its_verdict(tmp_path):
+    """``per_step`` gives, for every step, the navigator's truth-free evidence (the flag
+    studies' input) aligned with the suite's wrong/flagged verdict."""
+    from relnav.bench.nav_suite import EVIDENCE, run_method
+    from relnav.sim.presets import get_preset
+    from relnav.sim.scenario import simulate
+
+    simulate(get_preset("sim-voyager", max_frames=6, seed=1), tmp_path / "seq")
+    steps = run_method(tmp_path / "seq", "relnav", per_step=True)["steps"]
+    n = len(steps["wrong"])
+    assert n == 5 and len(steps["flagged"]) == n
+    assert set(steps["evidence"]) == {*EVIDENCE, "fitness"}
+    assert all(len(v) == n for v in steps["evidence"].values())
+    ev = steps["evidence"]
+    assert np.all(np.isfinite(ev["step_sigma_t"])) and np.all(ev["step_sigma_t"] > 0)
+    assert np.all((ev["fitness"] >= 0) & (ev["fitness"] <= 1))

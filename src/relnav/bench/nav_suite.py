@@ -33,6 +33,7 @@ from relnav.errors import ConfigError
 __all__ = [
     "ATTITUDE_SIGMA",
     "DEFAULT_METHODS",
+    "EVIDENCE",
     "GROUPS",
     "JITTER_DEG",
     "LEO_PERIOD_S",
@@ -83,6 +84,28 @@ PEERS = [
 ]
 DEFAULT_METHODS = ["relnav", *PEERS, "icp-plane"]
 WARM_UP_FRAMES = 12
+
+EVIDENCE = (
+    "step_sigma_t",
+    "step_sigma_r_deg",
+    "exceed_probability",
+    "chi2_motion",
+    "robust_rms_sigma",
+    "variance_factor",
+    "overlap",
+    "degeneracy",
+    "iterations",
+    "gate",
+    "sigma_t",
+    "sigma_r_deg",
+    "jitter_sigma_deg",
+    "same_rays",
+    "repeat_fraction",
+    "map_voxels",
+)
+"""The navigator's per-step diagnostics that need no ground truth (``result.info`` keys), which
+``run_method(per_step=True)`` returns under ``["steps"]["evidence"]`` for the flag studies, with
+the registration's ``fitness``."""
 
 GROUPS = ("suite", "holdout", "stress", "tumbling-holdout", "jitter-holdout")
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
@@ -362,13 +385,19 @@ def attitude_input(seq_dir: Path) -> Any:
     return AttitudeInput.from_tum(seq_dir / "chaser_attitude.tum", float(sigma))
 
 
+def _fitness(step: Any) -> float:
+    """A step's registration fitness (inlier fraction of the scan), NaN without a result."""
+    return float(step.result.fitness) if step.result is not None else math.nan
+
+
 def run_method(
     seq_dir: Path, method: str, per_step: bool = False, **options: Any
 ) -> dict[str, Any]:
     """Run one method on one sequence; APE/RPE (no alignment) of the causal trajectory (what a
     real-time loop has: every peer's), wrong and flagged steps, ms (``relnav`` with the
     :data:`MISSION` input unless ``options`` override it); a smoother's trajectory's APE/RPE
-    under ``"smoothed"``; ``per_step`` adds the steps' arrays under ``"steps"``."""
+    under ``"smoothed"``; ``per_step`` adds the steps' arrays under ``"steps"`` (with the
+    :data:`EVIDENCE` of each step under ``"evidence"``)."""
     from relnav.eval.metrics import evaluate_trajectories
     from relnav.io.sequences import ScanSequence
     from relnav.pipeline import run_sequence
@@ -417,6 +446,10 @@ def run_method(
             "error_t": et,
             "sigma_t": sigma[1:, 0],
             "exceed": np.array([i.get("exceed_probability", np.nan) for i in info], dtype=float),
+            "evidence": {
+                k: np.array([float(i.get(k, np.nan)) for i in info], dtype=float) for k in EVIDENCE
+            }
+            | {"fitness": np.array([_fitness(s) for s in run.steps[1:]], dtype=float)},
         }
     return out
 
@@ -524,7 +557,7 @@ def scorecard_table(results: dict[str, dict[str, Any]]) -> str:
     ]
     for row in scorecard(results):
         wf = f"{row['wrong_flagged']:.0%} of {row['wrong']}" if row["wrong"] else "no wrong step"
-        rf = f"{row['right_flagged']:.1%} of {row['right']}"
+        rf = f"{row['right_flagged']:.1%} of {row['right']}" if row["right"] else "no right step"
         cells = [cell(row, m, f"{row[m]:.2f}") for m in ("ape", "rpe_t", "rpe_r")]
         cells += [cell(row, "wrong_flagged", wf), cell(row, "right_flagged", rf)]
         cells += [cell(row, "time", f"{row['time']:.2f}"), ", ".join(row["misses"]) or "none"]
