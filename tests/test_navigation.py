@@ -380,6 +380,30 @@ def test_exceedance_probability_matches_closed_forms():
     assert exceedance_probability(np.full((6, 6), np.nan), 0.5, 0.1) == 1.0
 
 
+def test_exceedance_probability_counts_the_fixed_draws_exactly(rng):
+    """The compiled count and the no-draw shortcut (a bound that no draw can pass) give the
+    fraction of the fixed draws ``e = B z`` beyond either limit, draw for draw, on correlated
+    covariances from far inside to far beyond the limits."""
+    from relnav.navigation.integrity import _unit_normals, exceedance_probability
+
+    Z = _unit_normals()
+    lt, lr = 0.5, math.radians(5)
+    shortcut = 0
+    for scale in (1e-3, 0.02, 0.1, 0.3, 1.0):
+        for _ in range(20):
+            A = rng.standard_normal((6, 6)) * scale
+            C = A @ A.T
+            w, U = np.linalg.eigh(C)
+            e = Z @ (U * np.sqrt(np.maximum(w, 0.0))).T
+            beyond = (np.sum(e[:, :3] ** 2, axis=1) > lt**2) | (
+                np.sum(e[:, 3:] ** 2, axis=1) > lr**2
+            )
+            p = exceedance_probability(C, lt, lr)
+            assert abs(p - beyond.mean()) <= 2 / len(Z)  # at most a draw on a limit's edge
+            shortcut += p == 0.0
+    assert shortcut >= 20  # the smallest covariances take the shortcut, and it says 0
+
+
 def test_normal_information_drops_the_in_plane_pull(rng):
     """On a flat patch the normals fix only z, roll and pitch: the normal-only information has
     no translation along the plane and no rotation about its normal, the solver's has."""
