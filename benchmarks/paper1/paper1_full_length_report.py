@@ -69,6 +69,10 @@ LEDGER = {
     "ledger:uncentred": "αβ on raw (uncentred) coordinates",
     "ledger:frobenius": "αβ: Frobenius projection to SO(3)",
     "ledger:prior-identity": "identity instead of constant velocity for failed steps",
+    "ledger:median-resolution": "Tr the median nearest-neighbour distance (row 1)",
+    "ledger:raw-descriptors": "τ = 1 on the raw descriptors, not unit-scaled (row 7)",
+    "ledger:normals-knn10": "SHOT/GCC/αβ with normals from 10 nearest points (row 4; "
+    "compare with SHOT/GCC/αβ)",
     "ledger:icp-relnav": "Table 3's ICP from the pairs' Kabsch fit, scale-aware gate "
     "(HoD-S/GCC/ICP, not αβ: compare with Table 3's HoD-S row)",
 }
@@ -437,7 +441,8 @@ def main() -> None:
         "|---|" + "---|" * len(SCENARIOS),
     ]
     base = combo("hods", "alphabeta")
-    for lab, desc in [(base, "paper's defaults (HoD-S/GCC/αβ)"), *list(LEDGER.items())]:
+    shot = (combo("shot", "alphabeta"), "SHOT/GCC/αβ, the paper's defaults (base of row 4)")
+    for lab, desc in [(base, "paper's defaults (HoD-S/GCC/αβ)"), *list(LEDGER.items()), shot]:
         cells = []
         for s in SCENARIOS:
             a = A.get(s, {}).get(lab)

@@ -67,6 +67,16 @@ def normalize_descriptors(F: np.ndarray) -> np.ndarray:
     return out
 
 
+def _raw_descriptors(F: np.ndarray) -> np.ndarray:
+    """Descriptors as float32 rows, unscaled; rows holding a NaN/inf all-NaN (skipped)."""
+    F = np.asarray(F)
+    if F.ndim != 2:
+        raise InputError(f"descriptors must be a (K, D) array, got shape {F.shape}")
+    out = F.astype(np.float32)
+    out[~np.isfinite(out).all(axis=1)] = np.nan
+    return out
+
+
 def _check_keypoints(kp: np.ndarray | None, n_rows: int, name: str) -> np.ndarray:
     if kp is None:
         return np.arange(n_rows, dtype=np.int64)
@@ -92,6 +102,7 @@ def match_descriptors(
     src_keypoints: np.ndarray | None = None,
     tgt_keypoints: np.ndarray | None = None,
     chunk_bytes: int = _DEFAULT_CHUNK_BYTES,
+    normalize: bool = True,
 ) -> Correspondences:
     """Exact nearest neighbour of every valid source descriptor among the target descriptors.
 
@@ -115,6 +126,11 @@ def match_descriptors(
         Point index of each descriptor row; the identity when ``None``.
     chunk_bytes : int
         Memory budget of one block of the ``(chunk, Kt)`` float32 similarity matrix.
+    normalize : bool
+        Scale both sets to unit L2 norm first (default; relnav's reading of paper 1's "τ is set
+        to 1 to reduce the dependency between the threshold value and the metric used"). With
+        ``False`` the nearest neighbour and ``tau`` apply to the raw descriptors' L2 distance
+        (the literal reading: τ = 1 in each descriptor's own units).
 
     Returns
     -------
@@ -129,8 +145,11 @@ def match_descriptors(
     ConfigError
         ``tau`` is NaN or not positive.
     """
-    A = normalize_descriptors(src_desc)
-    B = normalize_descriptors(tgt_desc)
+    A, B = (
+        (normalize_descriptors(src_desc), normalize_descriptors(tgt_desc))
+        if normalize
+        else (_raw_descriptors(src_desc), _raw_descriptors(tgt_desc))
+    )
     if A.shape[1] != B.shape[1]:
         raise InputError(
             f"descriptor dimensions differ: source D={A.shape[1]}, target D={B.shape[1]}"
@@ -161,10 +180,16 @@ def match_descriptors(
     col_arg = np.zeros(nt, dtype=np.int64)  # per target: best valid-source position
     chunk = max(1, int(chunk_bytes // (4 * nt)))
     BvT = Bv.T
+    # unit rows: the largest dot product is the nearest; raw rows: the largest 2a·b − |b|²
+    # (for a source row) and 2a·b − |a|² (for a target column)
+    aa = np.einsum("ij,ij->i", Av, Av) if not normalize else None
+    bb = np.einsum("ij,ij->i", Bv, Bv) if not normalize else None
     for start in range(0, ns, chunk):
-        S = Av[start : start + chunk] @ BvT  # (c, nt) cosine similarities
-        best_t[start : start + chunk] = np.argmax(S, axis=1)
+        S = Av[start : start + chunk] @ BvT  # (c, nt) cosine similarities (unit rows)
+        best_t[start : start + chunk] = np.argmax(S if normalize else 2 * S - bb, axis=1)
         if mutual:
+            if not normalize:
+                S = 2 * S - aa[start : start + chunk, None]
             arg = np.argmax(S, axis=0)
             val = S[arg, np.arange(nt)]
             better = val > col_best  # strict: earlier (lower) source rows win ties

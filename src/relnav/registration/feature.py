@@ -101,12 +101,21 @@ class FeatureRegistration:
         Support radius in multiples of ``Tr``; the descriptor's default when omitted.
     normal_radius_factor : float
         Normal-estimation radius in multiples of ``Tr`` (ALGORITHMS §A: 5, [interpretation]).
+    normal_k : int, optional
+        Estimate the normals from the ``normal_k`` nearest points instead of that radius (PCL's
+        correspondence-grouping tutorial: 10); the paper is silent (ledger row 4).
+    resolution : {"mean", "median"}
+        ``Tr``: the mean (default, the usual definition) or the median distance of each point
+        to its nearest distinct neighbour; the paper does not define it (ledger row 1).
     keypoints : {"all", "voxel", "fps", "iss", "random"}
         Keypoint selection (paper 1: ``all``).
     keypoint_options : dict, optional
         Passed to :func:`relnav.features.keypoints.select_keypoints`.
     tau : float
         Descriptor-distance gate of the NN matching (paper 1: 1.0).
+    unit_descriptors : bool
+        Scale the descriptors to unit L2 norm before matching (default: relnav's reading of
+        τ = 1, ledger row 7); ``False``: τ on the raw descriptors' distance.
     mutual : bool
         Keep only mutual nearest neighbours.
     match_from : {"target", "source"}
@@ -134,9 +143,12 @@ class FeatureRegistration:
         *,
         radius_factor: float | None = None,
         normal_radius_factor: float = 5.0,
+        normal_k: int | None = None,
+        resolution: Literal["mean", "median"] = "mean",
         keypoints: str = "all",
         keypoint_options: dict[str, Any] | None = None,
         tau: float = 1.0,
+        unit_descriptors: bool = True,
         mutual: bool = False,
         radius_from: Literal["own", "source"] = "source",
         match_from: Literal["target", "source"] = "target",
@@ -157,6 +169,13 @@ class FeatureRegistration:
             raise ConfigError(f"radius_from must be 'own' or 'source', got {radius_from!r}")
         self.radius_factor = float(radius_factor or self.descriptor_spec.radius_factor)
         self.normal_radius_factor = float(normal_radius_factor)
+        if normal_k is not None and int(normal_k) < 3:
+            raise ConfigError(f"normal_k must be at least 3, got {normal_k!r}")
+        self.normal_k = None if normal_k is None else int(normal_k)
+        if resolution not in ("mean", "median"):
+            raise ConfigError(f"resolution must be 'mean' or 'median', got {resolution!r}")
+        self.resolution = resolution
+        self.unit_descriptors = bool(unit_descriptors)
         self.keypoint_method = keypoints
         self.keypoint_options = dict(keypoint_options or {})
         self.tau = float(tau)
@@ -224,7 +243,7 @@ class FeatureRegistration:
                 new_index = np.cumsum(finite) - 1
                 keypoints = new_index[keypoints[finite[keypoints]]]
         P = P[finite]
-        tr = mean_resolution(P) if P.shape[0] >= 2 else float("nan")
+        tr = mean_resolution(P, statistic=self.resolution) if P.shape[0] >= 2 else float("nan")
         timings["resolution"] = time.perf_counter() - t0
         if P.shape[0] < self.min_points or not np.isfinite(tr) or tr <= 0:
             empty = np.zeros((0, self.descriptor_spec.dim), np.float32)
@@ -246,7 +265,11 @@ class FeatureRegistration:
         normals = None
         if self.descriptor_spec.needs_normals:
             t0 = time.perf_counter()
-            normals = estimate_normals(P, radius=self.normal_radius_factor * tr)
+            normals = (
+                estimate_normals(P, k=self.normal_k)
+                if self.normal_k is not None
+                else estimate_normals(P, radius=self.normal_radius_factor * tr)
+            )
             timings["normals"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         desc = compute_descriptors(
@@ -331,6 +354,7 @@ class FeatureRegistration:
             b.descriptors,
             tau=self.tau,
             mutual=self.mutual,
+            normalize=self.unit_descriptors,
             src_keypoints=a.keypoints,
             tgt_keypoints=b.keypoints,
         )
