@@ -64,3 +64,26 @@ def test_bad_switches_are_config_errors():
         FeatureRegistration("hods", resolution="mode")
     with pytest.raises(ConfigError):
         FeatureRegistration("shot", normal_k=2)
+
+
+def test_every_ledger_switch_of_the_grid_is_in_the_ledger_and_its_report():
+    """A switch run by the full-length grid has a row in docs/paper1-deviations.md and a line
+    in the report's ledger table."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    labels = re.findall(
+        r'label: "(ledger:[a-z0-9-]+)"', (root / "configs/paper1-full-length.yaml").read_text()
+    )
+    assert len(labels) >= 15
+    ledger = (root / "docs/paper1-deviations.md").read_text()
+    spec = importlib.util.spec_from_file_location(
+        "paper1_full_length_report", root / "benchmarks/paper1/paper1_full_length_report.py"
+    )
+    report = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(report)
+    for label in labels:
+        assert label in ledger, label
+        assert label in report.LEDGER, label
