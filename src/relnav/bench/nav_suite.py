@@ -468,17 +468,18 @@ at most ``time`` × KISS-ICP's in the same run."""
 
 def relnav_ratios(res: dict[str, Any]) -> dict[str, Any] | None:
     """relnav's result on one sequence over the peers' (``res``: method → :func:`run_method`'s
-    dict): ``ape``, ``rpe_t``, ``rpe_r`` over each metric's best peer, ``time`` and ``run_time``
-    (median per frame and whole run over KISS-ICP's), ``best`` (the peer with the best APE);
-    ``None`` without relnav or a peer."""
+    dict): ``ape``, ``rpe_t``, ``rpe_r`` over each metric's best peer (those best values as
+    ``best_ape``, ``best_rpe_t``, ``best_rpe_r``), ``time`` and ``run_time`` (median per frame and
+    whole run over KISS-ICP's), ``best`` (the peer with the best APE); ``None`` without relnav or
+    a peer."""
     r = res.get("relnav", {})
     peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
     if "ape" not in r or not peers:
         return None
     kiss = peers.get("kiss-icp", {})
-    out: dict[str, Any] = {
-        m: r[m] / min(p[m] for p in peers.values()) for m in ("ape", "rpe_t", "rpe_r")
-    }
+    best = {m: min(p[m] for p in peers.values()) for m in ("ape", "rpe_t", "rpe_r")}
+    out: dict[str, Any] = {m: r[m] / best[m] for m in best}
+    out.update({f"best_{m}": v for m, v in best.items()})
     out["time"] = r["ms"] / kiss.get("ms", math.nan)
     out["run_time"] = r["wall_s"] / kiss.get("wall_s", math.nan)
     out["best"] = min(peers, key=lambda m: peers[m]["ape"])
@@ -505,7 +506,7 @@ def markdown_table(results: dict[str, dict[str, Any]]) -> str:
             f"| {seq} | {r['ape']:.2f} | {r['rpe_t']:.3f} / {r['rpe_r']:.2f} | "
             f"{r['wrong']}/{r['n_steps']} ({r['wrong_flagged']}) | {sm:.2f} | {r['ms']:.1f} | "
             f"{res[best]['ape']:.2f} ({best}) | "
-            f"{r['rpe_t'] / q['rpe_t']:.3f} / {r['rpe_r'] / q['rpe_r']:.2f} | {q['ape']:.2f}, "
+            f"{q['best_rpe_t']:.3f} / {q['best_rpe_r']:.2f} | {q['ape']:.2f}, "
             f"{q['rpe_t']:.2f}, {q['rpe_r']:.2f} | {q['time']:.2f}, {q['run_time']:.2f} |"
         )
     return head + "\n".join(rows)
