@@ -1,7 +1,8 @@
 """τ-gated exact nearest-neighbour matching of local descriptors (ALGORITHMS §B.1, Paper 1 eq. 5).
 
-Descriptors are scaled to unit L2 norm, so the Euclidean distance is ``d = sqrt(2 − 2 a·b)``
-and the nearest neighbour of a row is the row with the largest dot product. The dot products
+Descriptors are scaled to unit L2 norm (by default), so the Euclidean distance is
+``d = sqrt(2 − 2 a·b)`` and the nearest neighbour of a row is the row with the largest dot
+product; unscaled (``normalize=False``), the row with the largest ``2 a·b − |b|²``. The dot products
 are one float32 matrix product per chunk of source rows (exact, and faster than KD-trees at
 33–352 dimensions); the distance of each chosen pair is then recomputed in float64 so that
 near-zero distances are not swamped by float32 cancellation.
@@ -107,7 +108,8 @@ def match_descriptors(
     """Exact nearest neighbour of every valid source descriptor among the target descriptors.
 
     Each valid source row ``i`` is matched to ``j = argmin_n ‖f_i − g_n‖₂`` over the valid
-    target rows (ties → lowest target row), after unit-L2 normalisation of both sets, and the
+    target rows (ties → lowest target row), after unit-L2 normalisation of both sets (unless
+    ``normalize=False``), and the
     pair is accepted when ``‖f_i − g_j‖ < tau``. One correspondence per source descriptor
     (Paper 1 eq. 5; no ratio test).
 
