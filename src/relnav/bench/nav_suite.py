@@ -52,14 +52,14 @@ __all__ = [
     "judge_steps",
     "markdown_table",
     "paper",
+    "relnav_ratios",
     "run_method",
+    "scorecard",
+    "scorecard_table",
     "sequence_names",
     "simulate_suite",
     "step_errors",
     "stress",
-    "relnav_ratios",
-    "scorecard",
-    "scorecard_table",
     "stress_table",
     "suite",
     "tumbling_holdout",
@@ -583,16 +583,13 @@ def stress_table(plain: dict[str, Any], aided: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for seq, res in plain.items():
-        peers = {m: res[m] for m in PEERS if m in res and "error" not in res[m]}
-        own, att = res.get("relnav", {}), aided.get(seq, {}).get("relnav", {})
-        if "ape" not in own or not peers:
+        q = relnav_ratios(res)
+        if q is None:
             continue
-        best = min(peers, key=lambda m: peers[m]["ape"])
-        bt = min(p["rpe_t"] for p in peers.values())
-        br = min(p["rpe_r"] for p in peers.values())
+        own, att = res["relnav"], aided.get(seq, {}).get("relnav", {})
         a = cell(att) if "ape" in att else "– | – | –"
         rows.append(
-            f"| {seq} | {cell(own)} | {a} | {peers[best]['ape']:.2f} ({best}) | "
-            f"{bt:.3f} / {br:.2f} |"
+            f"| {seq} | {cell(own)} | {a} | {q['best_ape']:.2f} ({q['best']}) | "
+            f"{q['best_rpe_t']:.3f} / {q['best_rpe_r']:.2f} |"
         )
     return "\n".join(rows)

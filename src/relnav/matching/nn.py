@@ -184,7 +184,7 @@ def match_descriptors(
     BvT = Bv.T
     # unit rows: the largest dot product is the nearest; raw rows: the largest 2a·b − |b|²
     # (for a source row) and 2a·b − |a|² (for a target column)
-    aa = np.einsum("ij,ij->i", Av, Av) if not normalize else None
+    aa = np.einsum("ij,ij->i", Av, Av) if not normalize and mutual else None
     bb = np.einsum("ij,ij->i", Bv, Bv) if not normalize else None
     for start in range(0, ns, chunk):
         S = Av[start : start + chunk] @ BvT  # (c, nt) cosine similarities (unit rows)
