@@ -6,6 +6,7 @@ that the loader fails clearly on a bad folder."""
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 
@@ -77,6 +78,26 @@ def test_groups_list_the_expected_sequences_in_order():
     assert list(nav_suite.tumbling_holdout()) == EXPECTED["tumbling-holdout"]
     assert list(nav_suite.jitter_holdout()) == EXPECTED["jitter-holdout"]
     assert nav_suite.sequence_names(jittered=True) == EXPECTED["jitter-holdout"]
+
+
+@pytest.mark.parametrize(
+    ("flags", "group"),
+    [
+        ([], None),
+        (["--holdout"], "holdout"),
+        (["--stress"], "stress"),
+        (["--jitter-holdout"], "jitter-holdout"),
+    ],
+)
+def test_the_benchmarks_group_flags_select_that_group(flags, group):
+    # every navigation benchmark takes add_sequence_arguments' flags: each must be honoured
+    p = argparse.ArgumentParser()
+    nav_suite.add_sequence_arguments(p)
+    names = nav_suite.selected_names(p.parse_args(flags))
+    expected = EXPECTED[group] if group else [*nav_suite.suite(), *nav_suite.paper()]
+    assert names == expected
+    only = nav_suite.selected_names(p.parse_args([*flags, "--only", names[-1]]))
+    assert names[-1] in only and set(only) <= set(names)
 
 
 def test_every_scenario_file_is_valid_and_in_exactly_one_group():

@@ -27,7 +27,7 @@ from nav_weak_directions import PERTURBATIONS
 from relnav.bench.nav_suite import (
     add_sequence_arguments,
     run_method,
-    sequence_names,
+    selected_names,
     simulate_suite,
 )
 
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if not 1 <= a.perturb <= len(PERTURBATIONS):
         p.error(f"--perturb must be 1..{len(PERTURBATIONS)}")
-    names = sequence_names(a.holdout, a.only)
+    names = selected_names(a)
     folders = simulate_suite(a.out, names)
     opts = dict(o.split("=", 1) for o in a.options)
     label = " ".join(a.options) or "defaults"

@@ -24,7 +24,7 @@ from relnav.bench.nav_suite import (
     MISSION,
     add_sequence_arguments,
     judge_steps,
-    sequence_names,
+    selected_names,
     simulate_suite,
 )
 
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     add_sequence_arguments(p)
     a = p.parse_args(argv)
-    names = sequence_names(a.holdout, a.only)
+    names = selected_names(a)
     folders = simulate_suite(a.out, names)
     extra = dict(o.split("=", 1) for o in a.options)
     print(

@@ -37,7 +37,7 @@ from relnav.bench.nav_suite import (
     relnav_ratios,
     run_method,
     scorecard_table,
-    sequence_names,
+    selected_names,
     simulate_suite,
     stress_table,
     warm_up,
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         plain, aided = (json.loads(f.read_text()) for f in a.stress_table)
         print(stress_table(plain, aided))
         return 0
-    names = sequence_names(a.holdout, a.only, a.stress, a.jitter_holdout)
+    names = selected_names(a)
     folders = simulate_suite(a.out, names)
     methods = [m for m in a.methods.split(",") if m]
     relnav_options = dict(o.split("=", 1) for o in a.options)

@@ -32,7 +32,7 @@ from relnav.bench.nav_suite import (
     MISSION,
     add_sequence_arguments,
     run_method,
-    sequence_names,
+    selected_names,
     simulate_suite,
     step_errors,
 )
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(only="iridium-helical-64,orion-inclined-64")
     p.add_argument("--perturb", type=int, default=0, help="neutral perturbations (0 = none)")
     a = p.parse_args(argv)
-    names = sequence_names(a.holdout, a.only)
+    names = selected_names(a)
     if not names:
         p.error(f"no sequence matches --only {a.only!r} (--only '' for all)")
     folders = simulate_suite(a.out, names)

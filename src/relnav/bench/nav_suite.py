@@ -56,6 +56,7 @@ __all__ = [
     "run_method",
     "scorecard",
     "scorecard_table",
+    "selected_names",
     "sequence_names",
     "simulate_suite",
     "step_errors",
@@ -308,6 +309,12 @@ def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
+
+
+def selected_names(args: argparse.Namespace) -> list[str]:
+    """The sequences that the arguments of :func:`add_sequence_arguments` select (the suite by
+    default; ``--holdout``, ``--stress`` or ``--jitter-holdout``; ``--only``)."""
+    return sequence_names(args.holdout, args.only, args.stress, args.jitter_holdout)
 
 
 def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
