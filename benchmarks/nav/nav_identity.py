@@ -12,8 +12,10 @@ times left out). Issue 43's refactor was checked this way (41 runs identical).
     python benchmarks/nav/nav_identity.py snapshot --out bench/nav --to after    # new tree
     python benchmarks/nav/nav_identity.py compare before after
 
-Run the first line in a worktree of the old commit (``git worktree add``; ``PYTHONPATH`` its
-``src``) so that both snapshots see the same sequences.
+``-O key=value`` (repeatable) adds a navigator option to every run of relnav and its presets: an
+option that must not change the answers (``solver.threads``) is checked against a snapshot
+without it. Run the first line in a worktree of the old commit (``git worktree add``;
+``PYTHONPATH`` its ``src``) so that both snapshots see the same sequences.
 """
 
 from __future__ import annotations
@@ -55,8 +57,9 @@ def _strip_times(value: Any) -> Any:
     return value
 
 
-def snapshot(out: Path, to: Path) -> None:
-    """Run every job once and keep its results in ``to/<tag>.npz`` (skips those present)."""
+def snapshot(out: Path, to: Path, extra: dict[str, str] | None = None) -> None:
+    """Run every job once and keep its results in ``to/<tag>.npz`` (skips those present);
+    ``extra``: navigator options added to the runs of relnav and its presets."""
     from relnav.pipeline import resolve_method, run_sequence
 
     to.mkdir(parents=True, exist_ok=True)
@@ -71,6 +74,8 @@ def snapshot(out: Path, to: Path) -> None:
         if aided:
             options["attitude"] = attitude_input(folders[name])
         name_or_method, options, _ = resolve_method(method, options)
+        if method.startswith("relnav"):
+            options.update(extra or {})
         run = run_sequence(seq, name_or_method, max_frames=frames, **options)
         n = len(run.poses)
         metrics = evaluate_trajectories(
@@ -134,13 +139,14 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("snapshot", help="run every job and keep its results")
     s.add_argument("--out", type=Path, default=Path("bench/nav"), help="sequences' folder")
     s.add_argument("--to", type=Path, required=True, help="snapshot folder")
+    s.add_argument("-O", dest="options", action="append", default=[], help="key=value")
     c = sub.add_parser("compare", help="compare two snapshots")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
     args = p.parse_args(argv)
     warnings.simplefilter("ignore", FutureWarning)  # an old tree's flat option names
     if args.command == "snapshot":
-        snapshot(args.out, args.to)
+        snapshot(args.out, args.to, dict(o.split("=", 1) for o in args.options))
         return 0
     return 1 if compare(args.a, args.b) else 0
 

@@ -32,6 +32,7 @@ from typing import Any
 
 from relnav.bench.nav_suite import (
     DEFAULT_METHODS,
+    THREADED_PEERS,
     add_sequence_arguments,
     markdown_table,
     relnav_ratios,
@@ -48,6 +49,13 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     add_sequence_arguments(p)
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS))
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="threads within a frame for every method that has them (relnav's solver.threads, "
+        "KISS-ICP's and small_gicp's num_threads); default 1 (DESIGN §7)",
+    )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(
         "--stress-table",
@@ -77,6 +85,10 @@ def main(argv: list[str] | None = None) -> int:
     folders = simulate_suite(a.out, names)
     methods = [m for m in a.methods.split(",") if m]
     relnav_options = dict(o.split("=", 1) for o in a.options)
+    peer_options: dict[str, Any] = {}
+    if a.threads != 1:  # like with like: every method with threads gets as many
+        relnav_options.setdefault("solver.threads", str(a.threads))
+        peer_options = {m: {"num_threads": a.threads} for m in THREADED_PEERS}
     if names:
         warm_up(folders[names[0]], methods, relnav_options)
     results: dict[str, dict[str, Any]] = {}
@@ -85,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         for method in methods:
             try:
                 # strings: the navigator converts them to its options' types (bool, int, ...)
-                opts = relnav_options if method == "relnav" else {}
+                opts = relnav_options if method == "relnav" else peer_options.get(method, {})
                 r = run_method(folders[name], method, **opts)
             except Exception as e:  # a missing extra, say: report and go on
                 r = {"error": f"{type(e).__name__}: {e}"}

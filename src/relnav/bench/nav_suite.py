@@ -42,6 +42,7 @@ __all__ = [
     "PAPER_PRESETS",
     "PEERS",
     "TARGETS",
+    "THREADED_PEERS",
     "WARM_UP_FRAMES",
     "add_sequence_arguments",
     "attitude_input",
@@ -84,6 +85,8 @@ PEERS = [
     "kiss-matcher-icp",
 ]
 DEFAULT_METHODS = ["relnav", *PEERS, "icp-plane"]
+THREADED_PEERS = ("kiss-icp", "small-gicp")
+"""The peers whose adapters take ``num_threads`` (threads within a frame; 1 by default)."""
 WARM_UP_FRAMES = 12
 
 EVIDENCE = (

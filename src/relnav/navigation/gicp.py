@@ -326,7 +326,7 @@ def _new_cache(m: int) -> tuple:  # pragma: no cover - numba
     return (np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m), np.full(m, -1, np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _solve_loop(
     P: np.ndarray,
     trees: tuple,

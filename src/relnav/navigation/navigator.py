@@ -559,19 +559,18 @@ class Navigator:
         sym = self.symmetry.twist if self.symmetry is not None else None
         Lam_fit = stiffen_prior(Lam, sym, c.symmetry.gain) if sym is not None else Lam
         solver = self.solver
-        fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         sj = math.sqrt(self.motion.jitter_var) if self.symmetry is None else 0.0  # flat axis
         jittering = sj >= math.radians(c.prior.jitter_start_min_deg)
-        if fit["usable"] and c.prior.jitter_starts > 0 and jittering:
-            answers = [fit]
-            for T0 in rotated_starts(
-                T_pred, sj, c.prior.jitter_starts
-            ):  # other minima in the jitter
-                alt = solver.solve(P, T_pred, Lam, gate, rng, radius, False, Lam_fit, start=T0)
-                answers.append(alt)
+        if c.prior.jitter_starts > 0 and jittering:
+            starts = rotated_starts(T_pred, sj, c.prior.jitter_starts)  # other minima
+            answers = solver.solve_starts(P, T_pred, Lam, gate, rng, radius, Lam_fit, starts)
+            fit = answers[0]
+            for alt in answers[1:]:
                 fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
-            if c.integrity.ambiguity_rms > 0:
+            if len(answers) > 1 and c.integrity.ambiguity_rms > 0:
                 info.update(ambiguity(fit, answers, c))
+        else:
+            fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         recovered = False
         if fit["chi2"] > c.solver.chi2_gate and fit["usable"]:
             # the model and the scan disagree: is the model wrong (a manoeuvre, an

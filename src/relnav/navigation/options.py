@@ -183,6 +183,12 @@ class SolverOptions(_Section):
         ge=0,
         description="Point-to-point 1σ (× s₀) of the refinement on repeated points (0: off).",
     )
+    threads: int = Field(
+        1,
+        ge=0,
+        description="Threads for a frame's independent registrations (the extra starts under "
+        "jitter; 0: the usable cores). Same answers for any number.",
+    )
     repeat_max_points: int = Field(
         16000, ge=0, description="Points of the full scan used by that refinement (0: all)."
     )

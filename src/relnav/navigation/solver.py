@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from relnav._threads import thread_pool
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation.gicp import (
@@ -251,7 +252,6 @@ class MapSolver:
         (:mod:`relnav.navigation.repeated`). ``Lam_fit``: the prior's information inside the solver
         when it differs from ``Lam`` (the χ² against the motion model uses ``Lam``);
         ``voxel_map``: register onto that map instead of the navigator's."""
-        c = self.config
         target = self.map if voxel_map is None else voxel_map
         assert target is not None
         Lf = Lam if Lam_fit is None else Lam_fit
@@ -259,6 +259,64 @@ class MapSolver:
         fit = self.register_on_map(
             P, target.information, T0, T_pred, Lf, gate, rng, voxel_map=target
         )
+        return self._figures(P, fit, T_pred, Lam, Lf, gate, rng, radius, primary, voxel_map)
+
+    def solve_starts(
+        self,
+        P: np.ndarray,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
+        Lam_fit: np.ndarray,
+        starts: list[np.ndarray],
+    ) -> list[dict[str, Any]]:
+        """The frame's registration from the prediction (as :meth:`solve` with ``primary``) and,
+        when that one is usable, from each of the other ``starts`` (4, 4) (as :meth:`solve`
+        with ``start``): the answers in that order, or the first alone.
+
+        With ``solver.threads`` > 1 the registrations run together in a
+        :func:`~relnav._threads.thread_pool` (the compiled solver releases the interpreter; the
+        others' are then wasted when the first is not usable); the refinements and figures
+        follow in order in this thread, so the answers are the same for any number of threads.
+        """
+        assert self.map is not None
+        info = self.map.information  # the map's lazy arrays, built here before any thread
+        _ = self.map.search_trees, self.map.surface
+
+        def register(T0: np.ndarray) -> ScanToMapFit:
+            return self.register_on_map(P, info, T0, T_pred, Lam_fit, gate, rng)
+
+        def figures(fit: ScanToMapFit, primary: bool) -> dict[str, Any]:
+            return self._figures(P, fit, T_pred, Lam, Lam_fit, gate, rng, radius, primary, None)
+
+        pool = thread_pool(self.config.solver.threads)
+        together = list(pool.map(register, [T_pred, *starts])) if pool is not None else None
+        first = figures(together[0] if together is not None else register(T_pred), True)
+        if not first["usable"]:
+            return [first]
+        others = together[1:] if together is not None else [register(T0) for T0 in starts]
+        return [first, *(figures(fit, False) for fit in others)]
+
+    def _figures(
+        self,
+        P: np.ndarray,
+        fit: ScanToMapFit,
+        T_pred: np.ndarray,
+        Lam: np.ndarray,
+        Lf: np.ndarray,
+        gate: float,
+        rng: float,
+        radius: float,
+        primary: bool,
+        voxel_map: VoxelMap | None,
+    ) -> dict[str, Any]:
+        """:meth:`solve`'s answer from its registration ``fit``: the repeated-points refinement
+        (onto the navigator's map only) and the quality figures."""
+        c = self.config
+        target = self.map if voxel_map is None else voxel_map
+        assert target is not None
         repeat_frac, repeated = float("nan"), False
         if voxel_map is None:  # the repeated-points test compares with the navigator's map
             fit, repeat_frac, repeated = self.repeats.apply(
