@@ -79,6 +79,9 @@ def test_run_method_returns_each_steps_evidence_beside_its_verdict(tmp_path):
     assert n == 5 and len(steps["flagged"]) == n
     assert set(steps["evidence"]) == {*EVIDENCE, "fitness"}
     assert all(len(v) == n for v in steps["evidence"].values())
+    for key in ("error_t", "error_r", "sigma_t", "sigma_r"):  # the step's error and its own 1σ
+        assert len(steps[key]) == n and np.all(steps[key] >= 0), key
+    assert np.array_equal(steps["wrong"], (steps["error_t"] > 0.5) | (steps["error_r"] > 5.0))
     ev = steps["evidence"]
     assert np.all(np.isfinite(ev["step_sigma_t"])) and np.all(ev["step_sigma_t"] > 0)
     assert np.all((ev["fitness"] >= 0) & (ev["fitness"] <= 1))

@@ -18,13 +18,18 @@ right ones, with the ground truth used to choose the rule (so every figure is an
    sequences and tested on each held-out one (leave one sequence out), its threshold at 5 % of
    the training sequences' right steps.
 
-It prints the relnav flags' own counts beside them. Per-step data are cached in
-``OUT/flag_ceiling/<sequence>.npz`` (delete them to re-run).
+It prints the relnav flags' own counts beside them, then **which wrong steps the flags catch**:
+pooled over the sequences, by how far the step is beyond the limits (``max(e_t / 0.5 m,
+e_r / 5°)``) and by how far beyond its own 1σ (``max(e_t / σ_t, e_r / σ_r)``, the step's
+translation and rotation 1σ that the flags use). Per-step data are cached in
+``OUT/flag_ceiling/<sequence>.npz`` (delete them to re-run; a cache without the step errors is
+run again).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 from pathlib import Path
 
@@ -41,6 +46,39 @@ from relnav.bench.nav_suite import (
 
 RIGHT_FLAGGED = 0.05
 FEATURES = (*EVIDENCE, "fitness")
+STEP_ERRORS = ("error_t", "error_r")
+LIMITS = (0.5, 5.0)
+"""The suite's wrong-step limits: translation (m), rotation (deg)."""
+SIZE_BINS = (1.0, 1.5, 2.0, 5.0, np.inf)
+SIGMA_BINS = (0.0, 2.0, 3.0, 5.0, 10.0, np.inf)
+
+
+def caught_by_bins(
+    data: dict[str, dict[str, np.ndarray]], ratio: str, bins: tuple[float, ...]
+) -> list[tuple[float, float, int, int]]:
+    """The wrong steps pooled over ``data``, binned by ``ratio`` (``"limits"``: how far beyond
+    the limits, ``max(e_t / 0.5 m, e_r / 5°)``; ``"sigma"``: how far beyond the step's own 1σ,
+    ``max(e_t / σ_t, e_r / σ_r)``, NaN σ counted as the last bin): per bin ``(low, high, wrong,
+    of them flagged)``."""
+    x, fl = [], []
+    for d in data.values():
+        w = d["wrong"].astype(bool)
+        if ratio == "limits":
+            r = np.maximum(d["error_t"] / LIMITS[0], d["error_r"] / LIMITS[1])
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.maximum(
+                    d["error_t"] / d["step_sigma_t"], d["error_r"] / d["step_sigma_r_deg"]
+                )
+            r = np.where(np.isfinite(r), r, np.inf)
+        x.append(r[w])
+        fl.append(d["flagged"].astype(bool)[w])
+    r, f = np.concatenate(x), np.concatenate(fl)
+    out = []
+    for lo, hi in itertools.pairwise(bins):
+        m = (r > lo) & (r <= hi)
+        out.append((lo, hi, int(m.sum()), int((m & f).sum())))
+    return out
 
 
 def collect(out: Path, groups: list[str]) -> dict[str, dict[str, np.ndarray]]:
@@ -54,9 +92,14 @@ def collect(out: Path, groups: list[str]) -> dict[str, dict[str, np.ndarray]]:
     data = {}
     for name in names:
         f = cache / f"{name}.npz"
-        if not f.exists():
+        stale = True
+        if f.exists():
+            with np.load(f) as z:
+                stale = not set(STEP_ERRORS) <= set(z.files)
+        if stale:
             st = run_method(folders[name], "relnav", per_step=True)["steps"]
-            np.savez(f, wrong=st["wrong"], flagged=st["flagged"], **st["evidence"])
+            errors = {k: st[k] for k in STEP_ERRORS}
+            np.savez(f, wrong=st["wrong"], flagged=st["flagged"], **errors, **st["evidence"])
             print(f"{name:24s} {int(st['wrong'].sum()):3d} wrong of {len(st['wrong'])}", flush=True)
         with np.load(f) as z:
             data[name] = {k: z[k] for k in z.files}
@@ -163,6 +206,15 @@ def main(argv: list[str] | None = None) -> int:
     for k in FEATURES:
         v = np.concatenate([d[k] for d in data.values()])
         print(f"- {k}: {caught_at(v, w_all):.1%}")
+    for ratio, bins, what in (
+        ("limits", SIZE_BINS, "how far beyond the limits: max(e_t / 0.5 m, e_r / 5°)"),
+        ("sigma", SIGMA_BINS, "how far beyond its own 1σ: max(e_t / σ_t, e_r / σ_r)"),
+    ):
+        print(f"\nThe wrong steps by {what}, and relnav's flags on them:\n")
+        print("| ratio | wrong steps | flagged |\n|---|---|---|")
+        for lo, hi, n, f in caught_by_bins(data, ratio, bins):
+            share = f"{f} ({f / n:.0%})" if n else "–"
+            print(f"| {lo:g}–{hi:g} | {n} | {share} |")
     return 0
 
 

@@ -421,7 +421,7 @@ def run_method(
     run = run_sequence(seq, method, **options)
     wall = time.perf_counter() - t0
     m = evaluate_trajectories(run.timestamps, run.online_poses, seq.timestamps, seq.gt_poses)
-    et, _, wrong, flagged = judge_steps(run, seq.gt_poses)
+    et, er, wrong, flagged = judge_steps(run, seq.gt_poses)
     out = {
         "ape": m["ape_trans_rmse"],
         "ape_r": m["ape_rot_rmse_deg"],
@@ -454,7 +454,9 @@ def run_method(
             "wrong": wrong,
             "flagged": flagged,
             "error_t": et,
+            "error_r": er,
             "sigma_t": sigma[1:, 0],
+            "sigma_r": sigma[1:, 1],
             "exceed": np.array([i.get("exceed_probability", np.nan) for i in info], dtype=float),
             "evidence": {
                 k: np.array([float(i.get(k, np.nan)) for i in info], dtype=float) for k in EVIDENCE
