@@ -54,6 +54,7 @@ __all__ = [
     "markdown_table",
     "paper",
     "relnav_ratios",
+    "resolve_target",
     "run_method",
     "scorecard",
     "scorecard_table",
@@ -159,9 +160,11 @@ def configs_dir() -> Path:
     )
 
 
-def _target(target: dict[str, Any], root: Path) -> dict[str, Any]:
-    """A scenario's target with its mesh path made absolute (relative to ``root``), or its
-    procedural stand-in (:data:`MESH_FALLBACK`) when the mesh is absent."""
+def resolve_target(target: dict[str, Any], root: Path | None = None) -> dict[str, Any]:
+    """A scenario's target with its mesh path made absolute (relative to ``root``, default the
+    repository's root), or its procedural stand-in (:data:`MESH_FALLBACK`) when the mesh is
+    absent."""
+    root = configs_dir().parent if root is None else root
     if "path" not in target:
         return target
     path = Path(target["path"])
@@ -214,7 +217,7 @@ def group(name: str) -> dict[str, dict[str, Any]]:
         sc = load_yaml(configs_dir() / str(entry.scenario))
         if sc.get("name") != entry.label:
             raise ConfigError(f"{entry.scenario}: name {sc.get('name')!r} is not {entry.label!r}")
-        sc["target"] = _target(sc.get("target", {}), root)
+        sc["target"] = resolve_target(sc.get("target", {}), root)
         try:  # a bad file fails here, with the field named
             Scenario.model_validate(sc)
         except ValidationError as e:

@@ -131,6 +131,10 @@ class Navigator:
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit.mean_motion
+        # before the map: the first sighting's centroid and line of sight (target frame), and
+        # each later scan's time and centroid range
+        self._sighting: tuple[np.ndarray, np.ndarray] | None = None
+        self._ranges: list[tuple[float, float]] = []
 
     @property
     def map(self) -> VoxelMap | None:
@@ -193,6 +197,7 @@ class Navigator:
         self._boot_velocity = (v, P_vv)
         self.loop_closer, self.revisits = None, None
         self.symmetry, self._sym_count = None, 0
+        self._sighting, self._ranges = None, []
         self.repeats = RepeatedPoints(self.config.solver)
         self.solver = MapSolver(self.config, self.repeats)  # no map: the first frame builds it
         self.relocalizer = self._new_relocalizer()
@@ -229,6 +234,10 @@ class Navigator:
             if self._boot_velocity is not None:  # second pass of the first frames
                 v, P_vv = self._boot_velocity
                 self.motion.reset(velocity=v, velocity_covariance=P_vv)
+            elif self.config.startup.premap_range:  # the range rate before the map, if any
+                start = self._premap_velocity(self.motion.P[6:, 6:])
+                if start is not None:
+                    self.motion.reset(velocity=start[0], velocity_covariance=start[1])
             self._rescaled = True
             self.motion.start_smoothing(self.config.prior.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
@@ -483,13 +492,63 @@ class Navigator:
         i = f - self._f0
         return self._prefix[i] if 0 <= i < len(self._prefix) else self._online[f]
 
+    def _follow_range(self, P: np.ndarray, t: float, result: RegistrationResult) -> None:
+        """Before the map: move the pose along the first sighting's line of sight so that the
+        target's centroid lies at the scan's measured range.
+
+        **[interpretation]** (``startup.premap_range``) A few points cannot be registered, but
+        their centroid's range is measured to centimetres while the target is far: the first
+        scan with a point fixes the sighting (its centroid in the target frame from the given
+        pose, and the direction to it); each later one before the map sets the sensor's
+        position on that line at its own centroid's range, the attitude unchanged. What a
+        centroid cannot tell without the chaser's attitude (a turn about the target) stays as
+        it was. When the map starts, the motion model's velocity starts at the range rate
+        along that line, known to its fit's spread there (:meth:`_premap_velocity`). The step
+        stays ``failed``; ``premap_range_m`` records the range.
+        """
+        c_s = P.mean(0)
+        r = float(np.linalg.norm(c_s))
+        if not np.isfinite(r) or r <= 0:
+            return
+        if self._sighting is None:
+            R = self.pose[:3, :3]
+            self._sighting = (R @ c_s + self.pose[:3, 3], R @ (c_s / r))
+            return
+        c_target, u = self._sighting
+        self.pose[:3, 3] = c_target - u * r
+        result.info["premap_range_m"] = r
+        self._ranges.append((t, r))
+
+    def _premap_velocity(self, P_vv: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The body velocity (per second) that the ranges before the map imply — a line fitted
+        to range over time, along the first sighting's line of sight — and its covariance: the
+        model's own ``P_vv`` (6×6, per second²) but along that line the fit's spread plus 20 %
+        of the rate (the ranges are measured, the rest is not); None with fewer than three."""
+        if self._sighting is None or len(self._ranges) < 3:
+            return None
+        t, r = np.array(self._ranges).T
+        (rate, _), res, *_ = np.linalg.lstsq(np.c_[t - t.mean(), np.ones_like(t)], r, rcond=None)
+        spread = float(res[0]) / (len(t) - 2) if len(res) and len(t) > 2 else 0.0
+        sd = math.sqrt(spread / float(np.sum((t - t.mean()) ** 2))) + 0.2 * abs(rate)
+        u = self.pose[:3, :3].T @ self._sighting[1]  # the line of sight, body frame
+        v = np.zeros(6)
+        v[:3] = -u * rate
+        P = np.array(P_vv, dtype=float)
+        across = np.eye(3) - np.outer(u, u)
+        P[:3, :3] = across @ P[:3, :3] @ across + sd**2 * np.outer(u, u)
+        P[:3, 3:] = across @ P[:3, 3:]
+        P[3:, :3] = P[:3, 3:].T
+        return v, P
+
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
         c = self.config
         if len(P) < max(c.solver.min_points, 3):
-            # no map yet: keep the initial pose, wait for a usable scan
+            # no map yet: keep the initial pose (or follow the range), wait for a usable scan
             res = RegistrationResult(
                 status="failed", message=f"only {len(P)} finite points: no map started"
             )
+            if c.startup.premap_range and len(P):
+                self._follow_range(P, t, res)
             return OdometryStep(
                 self.pose.copy(),
                 np.eye(4),

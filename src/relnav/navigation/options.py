@@ -252,6 +252,11 @@ class StartupOptions(_Section):
     window: int = Field(
         10, ge=0, description="Frames refined together once tracked (0: off; else at least 3)."
     )
+    premap_range: bool = Field(
+        False,
+        description="Before the map starts, follow the target's range along the first sighting's "
+        "line of sight (scans of 1 to min_points - 1 points).",
+    )
     rounds: int = Field(10, ge=1, description="Largest number of rounds of that refinement.")
     gate: float = Field(
         3.0, gt=0, description="Pair gate of the refinement, × s₀ (at least two voxels)."
