@@ -1,6 +1,6 @@
 """Before the map: a far approach whose first scans have too few points to register
-(``startup.premap_range``): the pose follows the target's range along the first line of sight,
-and the motion model starts at that range rate."""
+(``startup.premap_range``): the pose follows the target's range along the first line of sight
+(its whole bearing with the chaser's attitude input), and the motion model starts at that rate."""
 
 from __future__ import annotations
 
@@ -89,3 +89,51 @@ def test_nothing_changes_when_the_first_scans_can_be_registered(tmp_path):
     on = run_sequence(seq, "relnav", **{"startup.premap_range": True})
     np.testing.assert_array_equal(off.poses, on.poses)
     np.testing.assert_array_equal(off.online_poses, on.online_poses)
+
+
+def test_with_the_attitude_input_the_whole_bearing_places_the_sensor(tmp_path):
+    """On a helical approach the first frames turn about the target: a range cannot see that,
+    the centroid's bearing under the measured attitude does."""
+    from relnav.navigation.attitude_input import AttitudeInput
+
+    out = tmp_path / "helix"
+    simulate(
+        {
+            "name": "helix",
+            "seed": 6,
+            "frames": 40,
+            "dt": 15.0,
+            "format": "npy",
+            "target": {"name": "asteroid", "scale_to": 10.0},
+            "pointing": {"attitude_sigma_deg": 0.01},
+            "sensors": [
+                {
+                    "preset": "goldeneye",
+                    "name": "flash",
+                    "overrides": {"rows": 24, "cols": 24, "range_sigma": 0.02},
+                }
+            ],
+            "trajectory": {
+                "kind": "helical-approach",
+                "params": {
+                    "radius_start": 100.0,
+                    "radius_end": 50.0,
+                    "height_start": 10.0,
+                    "height_end": 5.0,
+                    "turns": 0.3,
+                },
+            },
+        },
+        out,
+    )
+    seq = ScanSequence(out)
+    first_map = _sparse_frames(seq)
+    assert first_map >= 10
+    att = AttitudeInput.from_tum(out / "chaser_attitude.tum", 0.01)
+    errors = {}
+    for label, extra in (("range", {}), ("bearing", {"attitude": att})):
+        run = run_sequence(seq, "relnav", **{"startup.premap_range": True, **extra})
+        e = np.linalg.norm(run.online_poses[:, :3, 3] - seq.gt_poses[:, :3, 3], axis=1)
+        errors[label] = e[1 : first_map + 1].max()
+    assert errors["bearing"] < 5.0  # 3.4 m measured
+    assert errors["range"] > 20.0  # 63 m: the turn about the target is not seen

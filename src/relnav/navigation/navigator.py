@@ -131,10 +131,10 @@ class Navigator:
         self.symmetry: SymmetryAxis | None = None
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit.mean_motion
-        # before the map: the first sighting's centroid and line of sight (target frame), and
-        # each later scan's time and centroid range
-        self._sighting: tuple[np.ndarray, np.ndarray] | None = None
-        self._ranges: list[tuple[float, float]] = []
+        # before the map: the first sighting (centroid and line of sight, target frame; time;
+        # attitude) and each later scan's time, position and whether its bearing was used
+        self._sighting: tuple[np.ndarray, np.ndarray, float, np.ndarray] | None = None
+        self._premap: list[tuple[float, np.ndarray, bool]] = []
 
     @property
     def map(self) -> VoxelMap | None:
@@ -197,7 +197,7 @@ class Navigator:
         self._boot_velocity = (v, P_vv)
         self.loop_closer, self.revisits = None, None
         self.symmetry, self._sym_count = None, 0
-        self._sighting, self._ranges = None, []
+        self._sighting, self._premap = None, []
         self.repeats = RepeatedPoints(self.config.solver)
         self.solver = MapSolver(self.config, self.repeats)  # no map: the first frame builds it
         self.relocalizer = self._new_relocalizer()
@@ -493,50 +493,67 @@ class Navigator:
         return self._prefix[i] if 0 <= i < len(self._prefix) else self._online[f]
 
     def _follow_range(self, P: np.ndarray, t: float, result: RegistrationResult) -> None:
-        """Before the map: move the pose along the first sighting's line of sight so that the
-        target's centroid lies at the scan's measured range.
+        """Before the map: place the sensor where the scan's centroid says the target is.
 
         **[interpretation]** (``startup.premap_range``) A few points cannot be registered, but
-        their centroid's range is measured to centimetres while the target is far: the first
-        scan with a point fixes the sighting (its centroid in the target frame from the given
-        pose, and the direction to it); each later one before the map sets the sensor's
-        position on that line at its own centroid's range, the attitude unchanged. What a
-        centroid cannot tell without the chaser's attitude (a turn about the target) stays as
-        it was. When the map starts, the motion model's velocity starts at the range rate
-        along that line, known to its fit's spread there (:meth:`_premap_velocity`). The step
-        stays ``failed``; ``premap_range_m`` records the range.
+        their centroid's range is measured to centimetres while the target is far. The first
+        scan with a point fixes the sighting: its centroid in the target frame (from the given
+        pose) and the line of sight to it. Each later scan before the map then sets the sensor
+        on that line at its own centroid's range, the attitude unchanged: what a centroid
+        cannot tell without the chaser's attitude (a turn about the target) stays as it was.
+        With the attitude input covering the scans, the sensor is turned by the measured
+        rotation since the sighting and placed so that the whole centroid, bearing and range,
+        sits on the sighted point. When the map starts, the motion model's velocity starts at
+        the rate fitted to these positions (:meth:`_premap_velocity`). The step stays
+        ``failed``; ``premap_range_m`` records the range.
         """
         c_s = P.mean(0)
         r = float(np.linalg.norm(c_s))
         if not np.isfinite(r) or r <= 0:
             return
         if self._sighting is None:
-            R = self.pose[:3, :3]
-            self._sighting = (R @ c_s + self.pose[:3, 3], R @ (c_s / r))
+            R = self.pose[:3, :3].copy()
+            self._sighting = (R @ c_s + self.pose[:3, 3], R @ (c_s / r), t, R)
             return
-        c_target, u = self._sighting
-        self.pose[:3, 3] = c_target - u * r
+        c_target, u, t0, R0 = self._sighting
+        dR = self.attitude.step(t0, t) if self.attitude is not None else None
+        if dR is not None:  # the chaser's attitude: the whole bearing
+            self.pose[:3, :3] = R0 @ dR
+            self.pose[:3, 3] = c_target - self.pose[:3, :3] @ c_s
+        else:
+            self.pose[:3, 3] = c_target - u * r
         result.info["premap_range_m"] = r
-        self._ranges.append((t, r))
+        self._premap.append((t, self.pose[:3, 3].copy(), dR is not None))
 
     def _premap_velocity(self, P_vv: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The body velocity (per second) that the ranges before the map imply — a line fitted
-        to range over time, along the first sighting's line of sight — and its covariance: the
-        model's own ``P_vv`` (6×6, per second²) but along that line the fit's spread plus 20 %
-        of the rate (the ranges are measured, the rest is not); None with fewer than three."""
-        if self._sighting is None or len(self._ranges) < 3:
+        """The body velocity (per second) of the positions before the map — a line fitted to
+        them over time — and its covariance: the fit's spread plus 20 % of the speed in the
+        directions the positions measured (the line of sight, or every direction with the
+        attitude input), the model's own ``P_vv`` (6×6, per second²) in the others; None with
+        fewer than three positions."""
+        if self._sighting is None or len(self._premap) < 3:
             return None
-        t, r = np.array(self._ranges).T
-        (rate, _), res, *_ = np.linalg.lstsq(np.c_[t - t.mean(), np.ones_like(t)], r, rcond=None)
-        spread = float(res[0]) / (len(t) - 2) if len(res) and len(t) > 2 else 0.0
-        sd = math.sqrt(spread / float(np.sum((t - t.mean()) ** 2))) + 0.2 * abs(rate)
-        u = self.pose[:3, :3].T @ self._sighting[1]  # the line of sight, body frame
+        t = np.array([p[0] for p in self._premap])
+        X = np.array([p[1] for p in self._premap])
+        dt = t - t.mean()
+        if not np.sum(dt**2) > 0:
+            return None
+        slope = np.linalg.lstsq(np.c_[dt, np.ones_like(dt)], X, rcond=None)[0]
+        E = X - np.c_[dt, np.ones_like(dt)] @ slope
+        S = (E.T @ E) / max(len(t) - 2, 1) / float(np.sum(dt**2))  # the rate's covariance
+        R = self.pose[:3, :3]
         v = np.zeros(6)
-        v[:3] = -u * rate
+        v[:3] = R.T @ slope[0]
+        C = R.T @ S @ R + (0.2 * float(np.linalg.norm(slope[0]))) ** 2 * np.eye(3)
         P = np.array(P_vv, dtype=float)
-        across = np.eye(3) - np.outer(u, u)
-        P[:3, :3] = across @ P[:3, :3] @ across + sd**2 * np.outer(u, u)
-        P[:3, 3:] = across @ P[:3, 3:]
+        if all(p[2] for p in self._premap):  # every direction measured
+            P[:3, :3] = C
+            P[:3, 3:] = 0.0
+        else:  # the line of sight only
+            u = R.T @ self._sighting[1]
+            uu, across = np.outer(u, u), np.eye(3) - np.outer(u, u)
+            P[:3, :3] = across @ P[:3, :3] @ across + float(u @ C @ u) * uu
+            P[:3, 3:] = across @ P[:3, 3:]
         P[3:, :3] = P[:3, 3:].T
         return v, P
 
@@ -558,6 +575,8 @@ class Navigator:
                 n_raw,
                 time.perf_counter() - t_start,
             )
+        if c.startup.premap_range and self._sighting is not None:
+            self._follow_range(P, t, RegistrationResult())  # the map starts where this scan says
         self.solver.spacing0 = point_spacing(P)
         self.solver.map = self.solver.new_map()
         Pm = even_subset(P, c.map.max_map_points)

@@ -254,8 +254,9 @@ class StartupOptions(_Section):
     )
     premap_range: bool = Field(
         False,
-        description="Before the map starts, follow the target's range along the first sighting's "
-        "line of sight (scans of 1 to min_points - 1 points).",
+        description="Before the map starts (scans of 1 to min_points - 1 points), place the sensor "
+        "from each scan's centroid: its range along the first line of sight, or its whole "
+        "bearing with the attitude input.",
     )
     rounds: int = Field(10, ge=1, description="Largest number of rounds of that refinement.")
     gate: float = Field(
