@@ -3,8 +3,9 @@
     python benchmarks/nav/nav_premap.py --out bench/nav --perturb 6
 
 Before its map starts (scans of fewer than ``solver.min_points`` points) the navigator keeps its
-initial pose; with ``-O startup.premap_range=true`` it follows the target's range along the first
-sighting's line of sight and starts its motion model at that range rate
+initial pose; with ``-O startup.premap_range=true`` it places the sensor from each sparse scan's
+centroid (its range along the first sighting's line of sight, or its whole bearing with the
+chaser's attitude input) and starts its motion model at the positions' rate
 (:meth:`relnav.navigation.navigator.Navigator._follow_range`). This script runs relnav with and
 without it, with and without the chaser's measured attitude (``attitude=1``), under the first
 ``--perturb`` neutral perturbations of ``nav_weak_directions.py``, on the stress group's
