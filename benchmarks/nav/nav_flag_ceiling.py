@@ -38,6 +38,7 @@ import numpy as np
 from relnav.bench.nav_suite import (
     EVIDENCE,
     GROUPS,
+    WRONG_STEP,
     group,
     paper,
     run_method,
@@ -47,8 +48,6 @@ from relnav.bench.nav_suite import (
 RIGHT_FLAGGED = 0.05
 FEATURES = (*EVIDENCE, "fitness")
 STEP_ERRORS = ("error_t", "error_r")
-LIMITS = (0.5, 5.0)
-"""The suite's wrong-step limits: translation (m), rotation (deg)."""
 SIZE_BINS = (1.0, 1.5, 2.0, 5.0, np.inf)
 SIGMA_BINS = (0.0, 2.0, 3.0, 5.0, 10.0, np.inf)
 
@@ -64,7 +63,7 @@ def caught_by_bins(
     for d in data.values():
         w = d["wrong"].astype(bool)
         if ratio == "limits":
-            r = np.maximum(d["error_t"] / LIMITS[0], d["error_r"] / LIMITS[1])
+            r = np.maximum(d["error_t"] / WRONG_STEP[0], d["error_r"] / WRONG_STEP[1])
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
                 r = np.maximum(

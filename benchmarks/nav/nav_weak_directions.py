@@ -30,6 +30,7 @@ import numpy as np
 
 from relnav.bench.nav_suite import (
     MISSION,
+    WRONG_STEP,
     add_sequence_arguments,
     run_method,
     selected_names,
@@ -85,7 +86,7 @@ def _weak_direction_figures(seq_dir: Path, options: dict[str, Any]) -> dict[str,
         if Lam is not None:
             Lb = Ad.T @ Lam @ Ad
             prior_ratio.append(float(weak @ Hb @ weak) / max(float(weak @ Lb @ weak), 1e-300))
-        if not (et[k - 1] > 0.5 or er[k - 1] > 5.0):
+        if not (et[k - 1] > WRONG_STEP[0] or er[k - 1] > WRONG_STEP[1]):
             continue
         e = log_se3(invert(invert(gt[k - 1]) @ gt[k]) @ (invert(est[k - 1]) @ est[k]))
         eo = log_se3(invert(invert(gt[k - 1]) @ gt[k]) @ (invert(online[k - 1]) @ online[k]))

@@ -44,6 +44,7 @@ __all__ = [
     "TARGETS",
     "THREADED_PEERS",
     "WARM_UP_FRAMES",
+    "WRONG_STEP",
     "add_sequence_arguments",
     "attitude_input",
     "configs_dir",
@@ -89,6 +90,8 @@ DEFAULT_METHODS = ["relnav", *PEERS, "icp-plane"]
 THREADED_PEERS = ("kiss-icp", "small-gicp")
 """The peers whose adapters take ``num_threads`` (threads within a frame; 1 by default)."""
 WARM_UP_FRAMES = 12
+WRONG_STEP = (0.5, 5.0)
+"""A step is wrong beyond these errors: translation (m), rotation (deg)."""
 
 EVIDENCE = (
     "step_sigma_t",
@@ -367,7 +370,7 @@ def judge_steps(run: Any, gt: np.ndarray) -> tuple[np.ndarray, ...]:
     errors (:func:`step_errors`) of the causal poses (the ones each step's flag was given
     with), wrong (beyond 0.5 m or 5°) and flagged (not ``ok``)."""
     et, er = step_errors(np.asarray(run.online_poses), np.asarray(gt))
-    wrong = (et > 0.5) | (er > 5.0)
+    wrong = (et > WRONG_STEP[0]) | (er > WRONG_STEP[1])
     flagged = np.array([s.status not in ("ok", "first") for s in run.steps[1:]], dtype=bool)
     return et, er, wrong, flagged
 

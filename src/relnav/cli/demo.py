@@ -63,13 +63,9 @@ def run_folder_name(method: str) -> str:
 def default_jobs() -> int:
     """Processes for the demo's methods: the usable cores, at most 2 (the methods are few and
     each one's numba compilation is the cold run's main cost)."""
-    import os
+    from relnav._threads import usable_cores
 
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        n = os.cpu_count() or 1
-    return max(1, min(2, n))
+    return min(2, usable_cores())
 
 
 class _Trajectory(NamedTuple):

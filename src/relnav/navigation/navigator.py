@@ -492,7 +492,7 @@ class Navigator:
         i = f - self._f0
         return self._prefix[i] if 0 <= i < len(self._prefix) else self._online[f]
 
-    def _follow_range(self, P: np.ndarray, t: float, result: RegistrationResult) -> None:
+    def _follow_range(self, P: np.ndarray, t: float) -> float | None:
         """Before the map: place the sensor where the scan's centroid says the target is.
 
         **[interpretation]** (``startup.premap_range``) A few points cannot be registered, but
@@ -504,17 +504,17 @@ class Navigator:
         With the attitude input covering the scans, the sensor is turned by the measured
         rotation since the sighting and placed so that the whole centroid, bearing and range,
         sits on the sighted point. When the map starts, the motion model's velocity starts at
-        the rate fitted to these positions (:meth:`_premap_velocity`). The step stays
-        ``failed``; ``premap_range_m`` records the range.
+        the rate fitted to these positions (:meth:`_premap_velocity`). Returns the range (m)
+        when the sensor was placed, None for the sighting itself or a degenerate centroid.
         """
         c_s = P.mean(0)
         r = float(np.linalg.norm(c_s))
         if not np.isfinite(r) or r <= 0:
-            return
+            return None
         if self._sighting is None:
             R = self.pose[:3, :3].copy()
             self._sighting = (R @ c_s + self.pose[:3, 3], R @ (c_s / r), t, R)
-            return
+            return None
         c_target, u, t0, R0 = self._sighting
         dR = self.attitude.step(t0, t) if self.attitude is not None else None
         if dR is not None:  # the chaser's attitude: the whole bearing
@@ -522,8 +522,8 @@ class Navigator:
             self.pose[:3, 3] = c_target - self.pose[:3, :3] @ c_s
         else:
             self.pose[:3, 3] = c_target - u * r
-        result.info["premap_range_m"] = r
         self._premap.append((t, self.pose[:3, 3].copy(), dR is not None))
+        return r
 
     def _premap_velocity(self, P_vv: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The body velocity (per second) of the positions before the map — a line fitted to
@@ -565,7 +565,9 @@ class Navigator:
                 status="failed", message=f"only {len(P)} finite points: no map started"
             )
             if c.startup.premap_range and len(P):
-                self._follow_range(P, t, res)
+                r = self._follow_range(P, t)
+                if r is not None:  # the step stays failed: not registered, only placed
+                    res.info["premap_range_m"] = r
             return OdometryStep(
                 self.pose.copy(),
                 np.eye(4),
@@ -576,7 +578,7 @@ class Navigator:
                 time.perf_counter() - t_start,
             )
         if c.startup.premap_range and self._sighting is not None:
-            self._follow_range(P, t, RegistrationResult())  # the map starts where this scan says
+            self._follow_range(P, t)  # the map starts where this scan says
         self.solver.spacing0 = point_spacing(P)
         self.solver.map = self.solver.new_map()
         Pm = even_subset(P, c.map.max_map_points)

@@ -282,8 +282,7 @@ class MapSolver:
         follow in order in this thread, so the answers are the same for any number of threads.
         """
         assert self.map is not None
-        info = self.map.information  # the map's lazy arrays, built here before any thread
-        _ = self.map.search_trees, self.map.surface
+        info = self.map.information  # refreshes all the map's lazy arrays, before any thread
 
         def register(T0: np.ndarray) -> ScanToMapFit:
             return self.register_on_map(P, info, T0, T_pred, Lam_fit, gate, rng)
