@@ -49,8 +49,8 @@ def _sparse_frames(seq: ScanSequence) -> int:
 def test_the_pose_follows_the_range_before_the_map(approach):
     first_map = _sparse_frames(approach)
     assert first_map >= 10  # the scenario has the sparse start it is about
-    off = run_sequence(approach, "relnav")
-    on = run_sequence(approach, "relnav", **{"startup.premap_range": True})
+    off = run_sequence(approach, "relnav", **{"startup.premap_range": False})
+    on = run_sequence(approach, "relnav")  # on by default
     e_off = np.linalg.norm(off.online_poses[:, :3, 3] - approach.gt_poses[:, :3, 3], axis=1)
     e_on = np.linalg.norm(on.online_poses[:, :3, 3] - approach.gt_poses[:, :3, 3], axis=1)
     pre = slice(1, first_map)
@@ -85,8 +85,8 @@ def test_the_motion_model_starts_at_the_range_rate(approach):
 def test_nothing_changes_when_the_first_scans_can_be_registered(tmp_path):
     simulate(flash_orbit("premap-off", max_frames=12), tmp_path / "seq")
     seq = ScanSequence(tmp_path / "seq")
-    off = run_sequence(seq, "relnav")
-    on = run_sequence(seq, "relnav", **{"startup.premap_range": True})
+    off = run_sequence(seq, "relnav", **{"startup.premap_range": False})
+    on = run_sequence(seq, "relnav")
     np.testing.assert_array_equal(off.poses, on.poses)
     np.testing.assert_array_equal(off.online_poses, on.online_poses)
 

@@ -2,8 +2,9 @@
 
     python benchmarks/nav/nav_premap.py --out bench/nav --perturb 6
 
-Before its map starts (scans of fewer than ``solver.min_points`` points) the navigator keeps its
-initial pose; with ``-O startup.premap_range=true`` it places the sensor from each sparse scan's
+Before its map starts (scans of fewer than ``solver.min_points`` points) the navigator without
+the option (``-O startup.premap_range=false``) keeps its initial pose; with it (the default since
+session 28) it places the sensor from each sparse scan's
 centroid (its range along the first sighting's line of sight, or its whole bearing with the
 chaser's attitude input) and starts its motion model at the positions' rate
 (:meth:`relnav.navigation.navigator.Navigator._follow_range`). This script runs relnav with and
@@ -98,7 +99,10 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{a.perturb} runs per cell: median APE m [min–max], median RPE_t m, median wrong steps\n"
     )
-    print("| sequence | attitude input | defaults | startup.premap_range=true |\n|---|---|---|---|")
+    print(
+        "| sequence | attitude input | startup.premap_range=false | startup.premap_range=true "
+        "(default) |\n|---|---|---|---|"
+    )
     for name, folder in folders.items():
         for aided in (False, True):
             cells = []

@@ -253,7 +253,7 @@ class StartupOptions(_Section):
         10, ge=0, description="Frames refined together once tracked (0: off; else at least 3)."
     )
     premap_range: bool = Field(
-        False,
+        True,
         description="Before the map starts (scans of 1 to min_points - 1 points), place the sensor "
         "from each scan's centroid: its range along the first line of sight, or its whole "
         "bearing with the attitude input.",
