@@ -137,3 +137,22 @@ def test_with_the_attitude_input_the_whole_bearing_places_the_sensor(tmp_path):
         errors[label] = e[1 : first_map + 1].max()
     assert errors["bearing"] < 5.0  # 3.4 m measured
     assert errors["range"] > 20.0  # 63 m: the turn about the target is not seen
+
+
+def test_the_map_can_wait_for_denser_scans(approach):
+    """``startup.map_min_points``: scans sparser than it are placed by their range, and the map
+    starts at the first scan that has that many points."""
+    n = np.array([len(approach[i].points) for i in range(len(approach))])
+    start = int(np.argmax(n >= 12))
+    assert start > _sparse_frames(approach)  # the option changes where the map starts
+    run = run_sequence(approach, "relnav", **{"startup.map_min_points": 12})
+    assert run.steps[start].status == "first"
+    before = run.steps[1:start]
+    assert all(s.status == "failed" for s in before)
+    assert all(s.result.info["premap_range_m"] > 40.0 for s in before)
+    e = np.linalg.norm(run.online_poses[:, :3, 3] - approach.gt_poses[:, :3, 3], axis=1)
+    assert np.all(e[1 : start + 1] < 1.5)  # 0.82 m measured: a straight approach, the range
+    # places the sensor; registering the 8-point scans instead drags the track sideways
+    early = run_sequence(approach, "relnav")
+    e0 = np.linalg.norm(early.online_poses[:, :3, 3] - approach.gt_poses[:, :3, 3], axis=1)
+    assert e0[start] > 3.0  # 4.9 m measured

@@ -559,7 +559,7 @@ class Navigator:
 
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
         c = self.config
-        if len(P) < max(c.solver.min_points, 3):
+        if len(P) < max(c.solver.min_points, c.startup.map_min_points, 3):
             # no map yet: keep the initial pose (or follow the range), wait for a usable scan
             res = RegistrationResult(
                 status="failed", message=f"only {len(P)} finite points: no map started"

@@ -258,6 +258,12 @@ class StartupOptions(_Section):
         "from each scan's centroid: its range along the first line of sight, or its whole "
         "bearing with the attitude input.",
     )
+    map_min_points: int = Field(
+        0,
+        ge=0,
+        description="Points a scan needs to start the map (0: solver.min_points); sparser scans "
+        "before it are placed by premap_range.",
+    )
     rounds: int = Field(10, ge=1, description="Largest number of rounds of that refinement.")
     gate: float = Field(
         3.0, gt=0, description="Pair gate of the refinement, × s₀ (at least two voxels)."
