@@ -559,10 +559,11 @@ class Navigator:
 
     def _first(self, P: np.ndarray, t: float, n_raw: int, t_start: float) -> OdometryStep:
         c = self.config
-        if len(P) < max(c.solver.min_points, c.startup.map_min_points, 3):
+        need = max(c.solver.min_points, c.startup.map_min_points, 3)
+        if len(P) < need:
             # no map yet: keep the initial pose (or follow the range), wait for a usable scan
             res = RegistrationResult(
-                status="failed", message=f"only {len(P)} finite points: no map started"
+                status="failed", message=f"only {len(P)} finite points (< {need}): no map started"
             )
             if c.startup.premap_range and len(P):
                 r = self._follow_range(P, t)

@@ -254,9 +254,9 @@ class StartupOptions(_Section):
     )
     premap_range: bool = Field(
         True,
-        description="Before the map starts (scans of 1 to min_points - 1 points), place the sensor "
-        "from each scan's centroid: its range along the first line of sight, or its whole "
-        "bearing with the attitude input.",
+        description="Before the map starts (scans too sparse to start it), place the sensor from "
+        "each scan's centroid: its range along the first line of sight, or its whole bearing "
+        "with the attitude input (off: keep the initial pose).",
     )
     map_min_points: int = Field(
         0,
