@@ -66,6 +66,16 @@ EXPECTED = {
         "probe-tumble-64",
     ],
     "jitter-holdout": ["aura-jitter1", "aura-jitter2", "eros-jitter2", "voyager-walk1"],
+    "manoeuvre": [
+        "eros-cw-burn0.05",
+        "eros-cw-burn0.1",
+        "eros-cw-burn0.2",
+        "aura-vbar-burn0.05",
+        "aura-vbar-burn0.1",
+        "aura-vbar-burn0.2",
+        "aura-vbar-coast",
+        "envisat-vbar-burn0.1",
+    ],
 }
 
 
@@ -78,6 +88,8 @@ def test_groups_list_the_expected_sequences_in_order():
     assert list(nav_suite.tumbling_holdout()) == EXPECTED["tumbling-holdout"]
     assert list(nav_suite.jitter_holdout()) == EXPECTED["jitter-holdout"]
     assert nav_suite.sequence_names(jittered=True) == EXPECTED["jitter-holdout"]
+    assert list(nav_suite.manoeuvre()) == EXPECTED["manoeuvre"]
+    assert nav_suite.sequence_names(manoeuvred=True) == EXPECTED["manoeuvre"]
 
 
 @pytest.mark.parametrize(
@@ -87,6 +99,7 @@ def test_groups_list_the_expected_sequences_in_order():
         (["--holdout"], "holdout"),
         (["--stress"], "stress"),
         (["--jitter-holdout"], "jitter-holdout"),
+        (["--manoeuvre"], "manoeuvre"),
     ],
 )
 def test_the_benchmarks_group_flags_select_that_group(flags, group):

@@ -119,6 +119,33 @@ def test_cw_zero_mean_motion_is_straight_line():
     np.testing.assert_allclose(p2, p, atol=1e-6)
 
 
+def test_cw_burns_change_the_velocity_at_their_time():
+    s0 = np.array([0.0, -50.0, 0.0, 0.0, 0.1, 0.0])
+    t = np.arange(0.0, 101.0, 10.0)
+    dv = np.array([0.02, 0.1, -0.03])
+    p = tr.clohessy_wiltshire(t, state0=s0, mean_motion_rad_s=0.0, burns=[[45.0, *dv]])
+    straight = s0[:3] + t[:, None] * s0[3:]
+    np.testing.assert_allclose(p[t <= 45], straight[t <= 45], atol=1e-12)
+    late = t > 45
+    np.testing.assert_allclose(p[late], straight[late] + (t[late, None] - 45.0) * dv, atol=1e-12)
+    # in orbit: after the burn the path is the CW solution from the state the burn left
+    n = tr.mean_motion(6_778_137.0)
+    s1 = np.array([20.0, 0.0, 10.0, 0.0, -2 * n * 20.0, 0.0])
+    q = tr.clohessy_wiltshire(t, state0=s1, burns=[[45.0, *dv]])
+    after = tr.cw_stm(n, 45.0) @ s1 + np.r_[0.0, 0.0, 0.0, dv]
+    np.testing.assert_allclose(q[late], tr.cw_propagate(t[late] - 45.0, after, n=n)[:, :3])
+    np.testing.assert_allclose(q[~late], tr.clohessy_wiltshire(t, state0=s1)[~late])
+
+
+def test_cw_burns_are_checked():
+    with pytest.raises(ConfigError, match="a burn is"):
+        tr.make_trajectory("cw", 3, 10.0, {"burns": [[5.0, 0.1]]})
+    with pytest.raises(ConfigError, match="a burn is"):
+        tr.make_trajectory("cw", 3, 10.0, {"burns": [[-1.0, 0.0, 0.1, 0.0]]})
+    with pytest.raises(ConfigError, match="a burn is"):
+        tr.make_trajectory("cw", 3, 10.0, {"burns": [[5.0, np.nan, 0.1, 0.0]]})
+
+
 def test_cw_bounded_ellipse_default_is_periodic():
     n = tr.mean_motion(6_778_137.0)
     period = 2 * np.pi / n

@@ -52,6 +52,7 @@ __all__ = [
     "holdout",
     "jitter_holdout",
     "judge_steps",
+    "manoeuvre",
     "markdown_table",
     "paper",
     "relnav_ratios",
@@ -115,7 +116,7 @@ EVIDENCE = (
 ``run_method(per_step=True)`` returns under ``["steps"]["evidence"]`` for the flag studies, with
 the registration's ``fitness``."""
 
-GROUPS = ("suite", "holdout", "stress", "tumbling-holdout", "jitter-holdout")
+GROUPS = ("suite", "holdout", "stress", "tumbling-holdout", "jitter-holdout", "manoeuvre")
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
 
 JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
@@ -257,6 +258,13 @@ def jitter_holdout() -> dict[str, dict[str, Any]]:
     return group("jitter-holdout")
 
 
+def manoeuvre() -> dict[str, dict[str, Any]]:
+    """Impulsive burns on Clohessy–Wiltshire relative orbits, and a free drift as their
+    control: translation the constant-velocity prior does not predict, made after the
+    navigator's parameters were frozen (``configs/nav-manoeuvre.yaml``)."""
+    return group("manoeuvre")
+
+
 def paper(max_frames: int | None = None) -> dict[str, dict[str, Any]]:
     """Paper 1's presets of the suite's grid, by label, each its first ``max_frames`` frames
     (default: the grid's): with paper 1's data generation (one model cloud) and with fresh
@@ -278,13 +286,20 @@ def paper(max_frames: int | None = None) -> dict[str, dict[str, Any]]:
 
 
 def sequence_names(
-    held_out: bool = False, only: str = "", stressed: bool = False, jittered: bool = False
+    held_out: bool = False,
+    only: str = "",
+    stressed: bool = False,
+    jittered: bool = False,
+    manoeuvred: bool = False,
 ) -> list[str]:
     """The suite's sequences with the paper presets, or the held-out ones, or the stress group
-    (:func:`stress`), or the jitter hold-out (:func:`jitter_holdout`); ``only``: keep the names
-    containing one of its comma-separated substrings."""
+    (:func:`stress`), or the jitter hold-out (:func:`jitter_holdout`), or the manoeuvres
+    (:func:`manoeuvre`); ``only``: keep the names containing one of its comma-separated
+    substrings."""
     pool = (
-        jitter_holdout()
+        manoeuvre()
+        if manoeuvred
+        else jitter_holdout()
         if jittered
         else stress()
         if stressed
@@ -316,14 +331,20 @@ def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
         "parameters were frozen",
     )
     p.add_argument(
+        "--manoeuvre",
+        action="store_true",
+        help="impulsive burns on relative orbits (and a free drift), made after the parameters "
+        "were frozen",
+    )
+    p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
 
 
 def selected_names(args: argparse.Namespace) -> list[str]:
     """The sequences that the arguments of :func:`add_sequence_arguments` select (the suite by
-    default; ``--holdout``, ``--stress`` or ``--jitter-holdout``; ``--only``)."""
-    return sequence_names(args.holdout, args.only, args.stress, args.jitter_holdout)
+    default; ``--holdout``, ``--stress``, ``--jitter-holdout`` or ``--manoeuvre``; ``--only``)."""
+    return sequence_names(args.holdout, args.only, args.stress, args.jitter_holdout, args.manoeuvre)
 
 
 def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:

@@ -653,17 +653,20 @@ class Navigator:
         else:
             fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         recovered = False
-        if fit["chi2"] > c.solver.chi2_gate and fit["usable"]:
-            # the model and the scan disagree: is the model wrong (a manoeuvre, an
-            # over-confident velocity) or the registration? Register again under the first
-            # frame's weak prior; keep that answer only if the scan supports it as well.
+        disagree = fit["chi2"] > c.solver.chi2_gate and fit["usable"]
+        unmatched = c.solver.recover_unmatched and not fit["usable"]
+        if disagree or unmatched:
+            # the model and the scan disagree (or the scan is not within the model's gate at
+            # all): is the model wrong (a manoeuvre, an over-confident velocity) or the
+            # registration? Register again under the first frame's weak prior; keep that answer
+            # only if the scan supports it as well (when nothing matched, if it is usable).
             weak = solver.weak_prior(T_pred)
             gate_w = float(max(gate, 3.0 * solver.first_sigma[0]))
             alt = solver.solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
             if (
                 alt["usable"]
                 and alt["cond"] >= c.solver.min_degeneracy
-                and (alt["rms"] <= c.solver.recover_rms_ratio * fit["rms"])
+                and (unmatched or alt["rms"] <= c.solver.recover_rms_ratio * fit["rms"])
             ):
                 fit, recovered = alt, True
                 Lam = weak

@@ -168,6 +168,11 @@ class SolverOptions(_Section):
         description="A weak-prior answer is kept if its robust RMS is at most this × the first "
         "one's.",
     )
+    recover_unmatched: bool = Field(
+        False,
+        description="A scan with too few points near the map under the motion model's gate is "
+        "registered again under the weak prior (kept when usable and not degenerate).",
+    )
     min_degeneracy: float = Field(
         1e-6,
         ge=0,

@@ -428,6 +428,17 @@ def cw_propagate(times: np.ndarray, state0: ArrayLike3, *, n: float) -> np.ndarr
     return np.stack([cw_stm(n, float(tk)) @ s0 for tk in t]) if len(t) else np.zeros((0, 6))
 
 
+def _burn_list(burns: Sequence[Sequence[float]]) -> list[tuple[float, np.ndarray]]:
+    """Validated impulsive burns ``[(t, Δv (3,)), ...]`` sorted by time."""
+    out = []
+    for b in burns:
+        v = np.asarray(b, dtype=np.float64).reshape(-1)
+        if v.shape != (4,) or not np.all(np.isfinite(v)) or v[0] < 0:
+            raise InputError(f"a burn is [t (s, >= 0), dvx, dvy, dvz (m/s)], got {list(b)}")
+        out.append((float(v[0]), v[1:].copy()))
+    return sorted(out, key=lambda tb: tb[0])
+
+
 def clohessy_wiltshire(
     times: np.ndarray,
     *,
@@ -435,6 +446,7 @@ def clohessy_wiltshire(
     mean_motion_rad_s: float | None = None,
     semi_major_axis: float = 6_778_137.0,
     mu: float = MU_EARTH,
+    burns: Sequence[Sequence[float]] = (),
 ) -> np.ndarray:
     """Relative orbit from the closed-form Clohessy–Wiltshire solution: positions ``(N, 3)``.
 
@@ -452,9 +464,33 @@ def clohessy_wiltshire(
         Radius of the circular reference orbit (m), default 400 km altitude LEO.
     mu : float
         Gravitational parameter (m³/s²).
+    burns : sequence of (4,) float
+        Impulsive manoeuvres ``[t, Δvx, Δvy, Δvz]``: at time ``t`` (s) the chaser's LVLH
+        velocity changes by ``Δv`` (m/s), the motion a constant-velocity model does not
+        predict. A frame at the burn's time sees the state before it. Default: none.
     """
-    n = mean_motion(semi_major_axis, mu) if mean_motion_rad_s is None else mean_motion_rad_s
-    return cw_propagate(times, state0, n=float(n))[:, :3]
+    n = float(mean_motion(semi_major_axis, mu) if mean_motion_rad_s is None else mean_motion_rad_s)
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    plan = _burn_list(burns)
+    if not plan:
+        return cw_propagate(t, state0, n=n)[:, :3]
+    s = np.asarray(state0, dtype=np.float64).reshape(-1)
+    if s.shape != (6,) or not np.all(np.isfinite(s)):
+        raise InputError(
+            f"CW initial state must be 6 finite numbers [x y z vx vy vz], got {state0}"
+        )
+    out = np.zeros((len(t), 3))
+    epoch, after = 0.0, np.ones(len(t), dtype=bool)  # times not yet placed
+    for t_burn, dv in [*plan, (np.inf, np.zeros(3))]:
+        seg = after & (t <= t_burn)
+        if seg.any():
+            out[seg] = cw_propagate(t[seg] - epoch, s, n=n)[:, :3]
+        after &= ~seg
+        if np.isfinite(t_burn):  # the state just after the burn: the next segment's epoch
+            s = cw_stm(n, t_burn - epoch) @ s
+            s[3:] += dv
+            epoch = t_burn
+    return out
 
 
 # --------------------------------------------------------------------------------------------
