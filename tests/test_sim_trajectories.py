@@ -144,6 +144,8 @@ def test_cw_burns_are_checked():
         tr.make_trajectory("cw", 3, 10.0, {"burns": [[-1.0, 0.0, 0.1, 0.0]]})
     with pytest.raises(ConfigError, match="a burn is"):
         tr.make_trajectory("cw", 3, 10.0, {"burns": [[5.0, np.nan, 0.1, 0.0]]})
+    with pytest.raises(ConfigError, match="a burn is"):
+        tr.make_trajectory("cw", 3, 10.0, {"burns": [["soon", 0.0, 0.1, 0.0]]})
 
 
 def test_cw_bounded_ellipse_default_is_periodic():

@@ -414,16 +414,22 @@ def cw_stm(n: float, tau: float) -> np.ndarray:
     )
 
 
-def cw_propagate(times: np.ndarray, state0: ArrayLike3, *, n: float) -> np.ndarray:
-    """CW states ``(N, 6)`` at ``times`` (s, relative to the epoch of ``state0``).
-
-    Each state is ``Φ(t_k) s0`` (closed form, no accumulation of integration error).
-    """
+def _cw_state(state0: ArrayLike3) -> np.ndarray:
+    """A CW state ``[x y z ẋ ẏ ż]`` as a ``(6,)`` array; :class:`InputError` otherwise."""
     s0 = np.asarray(state0, dtype=np.float64).reshape(-1)
     if s0.shape != (6,) or not np.all(np.isfinite(s0)):
         raise InputError(
             f"CW initial state must be 6 finite numbers [x y z vx vy vz], got {state0}"
         )
+    return s0
+
+
+def cw_propagate(times: np.ndarray, state0: ArrayLike3, *, n: float) -> np.ndarray:
+    """CW states ``(N, 6)`` at ``times`` (s, relative to the epoch of ``state0``).
+
+    Each state is ``Φ(t_k) s0`` (closed form, no accumulation of integration error).
+    """
+    s0 = _cw_state(state0)
     t = np.asarray(times, dtype=np.float64).reshape(-1)
     return np.stack([cw_stm(n, float(tk)) @ s0 for tk in t]) if len(t) else np.zeros((0, 6))
 
@@ -432,9 +438,12 @@ def _burn_list(burns: Sequence[Sequence[float]]) -> list[tuple[float, np.ndarray
     """Validated impulsive burns ``[(t, Δv (3,)), ...]`` sorted by time."""
     out = []
     for b in burns:
-        v = np.asarray(b, dtype=np.float64).reshape(-1)
+        try:
+            v = np.asarray(b, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            v = np.full(0, np.nan)
         if v.shape != (4,) or not np.all(np.isfinite(v)) or v[0] < 0:
-            raise InputError(f"a burn is [t (s, >= 0), dvx, dvy, dvz (m/s)], got {list(b)}")
+            raise InputError(f"a burn is [t (s, >= 0), dvx, dvy, dvz (m/s)], got {b!r}")
         out.append((float(v[0]), v[1:].copy()))
     return sorted(out, key=lambda tb: tb[0])
 
@@ -474,11 +483,7 @@ def clohessy_wiltshire(
     plan = _burn_list(burns)
     if not plan:
         return cw_propagate(t, state0, n=n)[:, :3]
-    s = np.asarray(state0, dtype=np.float64).reshape(-1)
-    if s.shape != (6,) or not np.all(np.isfinite(s)):
-        raise InputError(
-            f"CW initial state must be 6 finite numbers [x y z vx vy vz], got {state0}"
-        )
+    s = _cw_state(state0)
     out = np.zeros((len(t), 3))
     epoch, after = 0.0, np.ones(len(t), dtype=bool)  # times not yet placed
     for t_burn, dv in [*plan, (np.inf, np.zeros(3))]:
