@@ -8,11 +8,18 @@ import numpy as np
 
 from relnav.geometry.rotations import angle_between_rotations
 
-FLASH_64 = {
-    "preset": "goldeneye",
-    "name": "flash",
-    "overrides": {"rows": 64, "cols": 64, "range_sigma": 0.02},
-}
+
+def flash(rows: int, range_sigma: float = 0.02) -> dict[str, Any]:
+    """A ``rows``×``rows`` flash LIDAR (the goldeneye preset) with ``range_sigma`` (m) of range
+    noise."""
+    return {
+        "preset": "goldeneye",
+        "name": "flash",
+        "overrides": {"rows": rows, "cols": rows, "range_sigma": range_sigma},
+    }
+
+
+FLASH_64 = flash(64)
 """A 64×64 flash LIDAR with 2 cm range noise."""
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nav_scenarios import flash
 from relnav.io.sequences import ScanSequence
 from relnav.navigation.attitude_input import AttitudeInput
 from relnav.pipeline import run_sequence
@@ -29,13 +30,7 @@ def burn(tmp_path_factory):
             "format": "npy",
             "target": {"name": "envisat", "scale_to": 10.0},
             "pointing": {"attitude_sigma_deg": 0.01},
-            "sensors": [
-                {
-                    "preset": "goldeneye",
-                    "name": "flash",
-                    "overrides": {"rows": 96, "cols": 96, "range_sigma": 0.02},
-                }
-            ],
+            "sensors": [flash(96)],
             "trajectory": {
                 "kind": "cw",
                 "params": {"state0": [0, -50, 0, 0, 0, 0], "burns": [[95.0, 0, 0.3, 0]]},

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nav_scenarios import flash_orbit
+from nav_scenarios import flash, flash_orbit
 from relnav.io.sequences import ScanSequence
 from relnav.navigation.navigator import Navigator
 from relnav.pipeline import run_sequence
@@ -27,13 +27,7 @@ def approach(tmp_path_factory):
             "dt": 10.0,
             "format": "npy",
             "target": {"name": "asteroid", "scale_to": 10.0},
-            "sensors": [
-                {
-                    "preset": "goldeneye",
-                    "name": "flash",
-                    "overrides": {"rows": 24, "cols": 24, "range_sigma": 0.02},
-                }
-            ],
+            "sensors": [flash(24)],
             "trajectory": {"kind": "vbar", "params": {"start": -110.0, "stop": -40.0}},
         },
         out,
@@ -106,13 +100,7 @@ def test_with_the_attitude_input_the_whole_bearing_places_the_sensor(tmp_path):
             "format": "npy",
             "target": {"name": "asteroid", "scale_to": 10.0},
             "pointing": {"attitude_sigma_deg": 0.01},
-            "sensors": [
-                {
-                    "preset": "goldeneye",
-                    "name": "flash",
-                    "overrides": {"rows": 24, "cols": 24, "range_sigma": 0.02},
-                }
-            ],
+            "sensors": [flash(24)],
             "trajectory": {
                 "kind": "helical-approach",
                 "params": {

@@ -23,10 +23,10 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from nav_premap import cell
+from nav_premap import print_table, simulate_scenarios
 from nav_weak_directions import PERTURBATIONS
 
-from relnav.bench.nav_suite import manoeuvre, resolve_target, simulate_suite
+from relnav.bench.nav_suite import manoeuvre, simulate_suite
 
 
 def _cw(
@@ -96,27 +96,6 @@ CONFIGS: dict[str, dict[str, str]] = {
 """The navigator's configurations compared."""
 
 
-def simulate_fresh(out: Path) -> dict[str, Path]:
-    """Simulate (once) every :data:`FRESH` sequence into ``out/burns/<name>``."""
-    from relnav.sim.scenario import simulate
-
-    folders = {}
-    for name, sc in FRESH.items():
-        d = out / "burns" / name
-        if not (d / "scenario.yaml").exists():
-            full = {
-                **sc,
-                "name": name,
-                "frames": 120,
-                "format": "npy",
-                "pointing": {"attitude_sigma_deg": 0.01},
-                "target": resolve_target(sc["target"]),
-            }
-            simulate(full, d, overwrite=True)
-        folders[name] = d
-    return folders
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
@@ -125,19 +104,11 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("ignore", FutureWarning)  # the perturbations' flat option names
     if not 1 <= a.perturb <= len(PERTURBATIONS):
         p.error(f"--perturb must be 1..{len(PERTURBATIONS)}")
-    folders = {**simulate_suite(a.out, list(manoeuvre())), **simulate_fresh(a.out)}
-    print(
-        f"{a.perturb} runs per cell: median APE m [min–max], median RPE_t m, median wrong "
-        "steps, median wrong steps not flagged\n"
-    )
-    print(f"| sequence | attitude input | {' | '.join(CONFIGS)} |")
-    print("|---" * (2 + len(CONFIGS)) + "|")
-    for name, folder in folders.items():
-        for aided in (False, True):
-            cells = [
-                cell(folder, {**o, "attitude": str(aided)}, a.perturb) for o in CONFIGS.values()
-            ]
-            print(f"| {name} | {'yes' if aided else 'no'} | {' | '.join(cells)} |", flush=True)
+    folders = {
+        **simulate_suite(a.out, list(manoeuvre())),
+        **simulate_scenarios(a.out / "burns", FRESH),
+    }
+    print_table(folders, CONFIGS, a.perturb)
     return 0
 
 

@@ -127,14 +127,14 @@ CONFIGS: dict[str, dict[str, str]] = {
 """The navigator's configurations compared (``--map-min-points`` adds one)."""
 
 
-def simulate_held_out(out: Path, sets: dict[str, dict[str, Any]] | None = None) -> dict[str, Path]:
-    """Simulate (once) every approach of ``sets`` (default :data:`HELD_OUT` and :data:`FRESH`)
-    into ``out/premap/<name>``."""
+def simulate_scenarios(out: Path, scenarios: dict[str, dict[str, Any]]) -> dict[str, Path]:
+    """Simulate (once) every scenario of ``scenarios`` (120 frames, the chaser's measured
+    attitude written at 0.01°) into ``out/<name>``; their folders by name."""
     from relnav.sim.scenario import simulate
 
     folders = {}
-    for name, sc in (sets or {**HELD_OUT, **FRESH}).items():
-        d = out / "premap" / name
+    for name, sc in scenarios.items():
+        d = out / name
         if not (d / "scenario.yaml").exists():
             full = {
                 **sc,
@@ -162,6 +162,21 @@ def cell(folder: Path, options: dict[str, str], perturb: int) -> str:
     )
 
 
+def print_table(folders: dict[str, Path], configs: dict[str, dict[str, str]], perturb: int) -> None:
+    """Print one row per sequence and attitude input (without, with), one :func:`cell` per
+    configuration of relnav's options."""
+    print(
+        f"{perturb} runs per cell: median APE m [min–max], median RPE_t m, median wrong "
+        "steps, median wrong steps not flagged\n"
+    )
+    print(f"| sequence | attitude input | {' | '.join(configs)} |")
+    print("|---" * (2 + len(configs)) + "|")
+    for name, folder in folders.items():
+        for aided in (False, True):
+            cells = [cell(folder, {**o, "attitude": str(aided)}, perturb) for o in configs.values()]
+            print(f"| {name} | {'yes' if aided else 'no'} | {' | '.join(cells)} |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
@@ -181,19 +196,11 @@ def main(argv: list[str] | None = None) -> int:
         configs[f"startup.map_min_points={a.map_min_points}"] = {
             "startup.map_min_points": str(a.map_min_points)
         }
-    folders = {**simulate_suite(a.out, ["voyager-approach"]), **simulate_held_out(a.out)}
-    print(
-        f"{a.perturb} runs per cell: median APE m [min–max], median RPE_t m, median wrong "
-        "steps, median wrong steps not flagged\n"
-    )
-    print(f"| sequence | attitude input | {' | '.join(configs)} |")
-    print("|---" * (2 + len(configs)) + "|")
-    for name, folder in folders.items():
-        for aided in (False, True):
-            cells = [
-                cell(folder, {**o, "attitude": str(aided)}, a.perturb) for o in configs.values()
-            ]
-            print(f"| {name} | {'yes' if aided else 'no'} | {' | '.join(cells)} |", flush=True)
+    folders = {
+        **simulate_suite(a.out, ["voyager-approach"]),
+        **simulate_scenarios(a.out / "premap", {**HELD_OUT, **FRESH}),
+    }
+    print_table(folders, configs, a.perturb)
     return 0
 
 
