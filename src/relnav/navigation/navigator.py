@@ -23,7 +23,9 @@ Per frame ``k``:
    correction inconsistent with the motion model (χ² beyond ``solver.chi2_gate``) unless a second
    registration under the weak prior fits the scan as well (``solver.recover_rms_ratio``; then the
    filter is widened) → ``failed``/``degenerate``: the pose keeps the prediction and the map is not
-   updated. An accepted step whose covariance gives it a probability above
+   updated. A scan with too few points within the model's gate (after a burn, say) is registered
+   under the weak prior too (``solver.recover_unmatched``; with the measured attitude the prior
+   keeps its rotation). An accepted step whose covariance gives it a probability above
    ``integrity.flag_probability`` of an error beyond ``integrity.flag_limit_t`` /
    ``integrity.flag_limit_r_deg`` is ``flagged``: a label only, the step is used as an ``ok`` one.
 4. **Update** the filter with the registered pose and the scan's own information (scaled by
@@ -129,6 +131,7 @@ class Navigator:
         self.startup = StartupWindow(self.config)
         self._prefix: list[np.ndarray] = []  # the start-up window's corrected earlier poses
         self.symmetry: SymmetryAxis | None = None
+        self._aided = False  # this frame's prediction took the measured attitude
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit.mean_motion
         # before the map: the first sighting (centroid and line of sight, target frame; time;
@@ -245,8 +248,11 @@ class Navigator:
         learn = self._settled() and self.attitude is None  # jitter: unless it is measured
         self.motion.jitter_rate = self.config.prior.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
+        aided = None
         if self.attitude is not None:  # the chaser's measured rotation over the step
-            T_pred, P_pp = aided_prediction(self.motion, self.attitude, t) or (T_pred, P_pp)
+            aided = aided_prediction(self.motion, self.attitude, t)
+            T_pred, P_pp = aided or (T_pred, P_pp)
+        self._aided = aided is not None
         self.repeats.observe_rays(P, self.spacing0)
         try:
             result = self._register(P, T_pred, P_pp, timings)
@@ -273,6 +279,8 @@ class Navigator:
         elif result.status == "ok":
             if result.info.get("recovered"):
                 st, sr = self.solver.first_sigma
+                if result.info.get("rotation_kept"):  # the measured rotation was not in doubt
+                    sr = 0.0
                 self.motion.widen(np.array([st] * 3 + [sr] * 3))
             self.motion.update(result.T_target_source, result.info["information"])
             if self.config.prior.adaptive_noise:
@@ -654,13 +662,19 @@ class Navigator:
             fit = solver.solve(P, T_pred, Lam, gate, rng, radius, Lam_fit=Lam_fit)
         recovered = False
         disagree = fit["chi2"] > c.solver.chi2_gate and fit["usable"]
-        unmatched = c.solver.recover_unmatched and not fit["usable"]
+        retry = c.solver.recover_unmatched
+        unmatched = not fit["usable"] and (
+            retry == "always" or (retry == "with_attitude" and self._aided)
+        )
         if disagree or unmatched:
             # the model and the scan disagree (or the scan is not within the model's gate at
             # all): is the model wrong (a manoeuvre, an over-confident velocity) or the
             # registration? Register again under the first frame's weak prior; keep that answer
             # only if the scan supports it as well (when nothing matched, if it is usable).
-            weak = solver.weak_prior(T_pred)
+            # a scan that matched nothing under the model: with the chaser's attitude measured,
+            # only the translation is in doubt; its rotation keeps the measured covariance
+            keep = unmatched and self._aided
+            weak = solver.weak_prior(T_pred, P_pp[3:, 3:] if keep else None)
             gate_w = float(max(gate, 3.0 * solver.first_sigma[0]))
             alt = solver.solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
             if (
@@ -670,6 +684,7 @@ class Navigator:
             ):
                 fit, recovered = alt, True
                 Lam = weak
+                info["rotation_kept"] = keep
         timings["register"] = time.perf_counter() - ts
         unstable = False
         if (

@@ -168,10 +168,12 @@ class SolverOptions(_Section):
         description="A weak-prior answer is kept if its robust RMS is at most this × the first "
         "one's.",
     )
-    recover_unmatched: bool = Field(
-        False,
+    recover_unmatched: Literal["never", "with_attitude", "always"] = Field(
+        "with_attitude",
         description="A scan with too few points near the map under the motion model's gate is "
-        "registered again under the weak prior (kept when usable and not degenerate).",
+        "registered again under the weak prior (kept when usable and not degenerate): never, "
+        "only when the prediction took the measured attitude (the prior then keeps its "
+        "rotation and the filter widens in translation only), or always.",
     )
     min_degeneracy: float = Field(
         1e-6,

@@ -189,10 +189,15 @@ class MapSolver:
             )
         return fit, unstable
 
-    def weak_prior(self, T_pred: np.ndarray) -> np.ndarray:
-        """Information (left, target frame) of the first frame's weak motion prior."""
+    def weak_prior(self, T_pred: np.ndarray, rotation: np.ndarray | None = None) -> np.ndarray:
+        """Information (left, target frame) of the first frame's weak motion prior; with
+        ``rotation`` (3×3, rad², body frame: a measured attitude's covariance) that instead of
+        the weak rotation block."""
         st, sr = self.first_sigma
-        return left_information(T_pred, np.diag([st**2] * 3 + [sr**2] * 3))
+        S = np.diag([st**2] * 3 + [sr**2] * 3)
+        if rotation is not None:
+            S[3:, 3:] = rotation
+        return left_information(T_pred, S)
 
     def register_on_map(
         self,
