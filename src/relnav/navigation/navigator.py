@@ -131,7 +131,6 @@ class Navigator:
         self.startup = StartupWindow(self.config)
         self._prefix: list[np.ndarray] = []  # the start-up window's corrected earlier poses
         self.symmetry: SymmetryAxis | None = None
-        self._aided = False  # this frame's prediction took the measured attitude
         self._sym_count = 0
         self.orbit: OrbitCorrection | None = None  # set by finalize() with orbit.mean_motion
         # before the map: the first sighting (centroid and line of sight, target frame; time;
@@ -252,10 +251,9 @@ class Navigator:
         if self.attitude is not None:  # the chaser's measured rotation over the step
             aided = aided_prediction(self.motion, self.attitude, t)
             T_pred, P_pp = aided or (T_pred, P_pp)
-        self._aided = aided is not None
         self.repeats.observe_rays(P, self.spacing0)
         try:
-            result = self._register(P, T_pred, P_pp, timings)
+            result = self._register(P, T_pred, P_pp, timings, aided=aided is not None)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             result = RegistrationResult(
@@ -546,8 +544,9 @@ class Navigator:
         dt = t - t.mean()
         if not np.sum(dt**2) > 0:
             return None
-        slope = np.linalg.lstsq(np.c_[dt, np.ones_like(dt)], X, rcond=None)[0]
-        E = X - np.c_[dt, np.ones_like(dt)] @ slope
+        A = np.c_[dt, np.ones_like(dt)]
+        slope = np.linalg.lstsq(A, X, rcond=None)[0]
+        E = X - A @ slope
         S = (E.T @ E) / max(len(t) - 2, 1) / float(np.sum(dt**2))  # the rate's covariance
         R = self.pose[:3, :3]
         v = np.zeros(6)
@@ -622,8 +621,15 @@ class Navigator:
         )
 
     def _register(
-        self, P: np.ndarray, T_pred: np.ndarray, P_pp: np.ndarray, timings: dict
+        self,
+        P: np.ndarray,
+        T_pred: np.ndarray,
+        P_pp: np.ndarray,
+        timings: dict,
+        aided: bool = False,
     ) -> RegistrationResult:
+        """Register the scan ``P`` onto the map from the prediction ``(T_pred, P_pp)`` and judge
+        it (``aided``: the prediction's rotation is the chaser's measured attitude)."""
         c = self.config
         assert self.map is not None
         info: dict[str, Any] = {"method": self.name}
@@ -664,16 +670,16 @@ class Navigator:
         disagree = fit["chi2"] > c.solver.chi2_gate and fit["usable"]
         retry = c.solver.recover_unmatched
         unmatched = not fit["usable"] and (
-            retry == "always" or (retry == "with_attitude" and self._aided)
+            retry == "always" or (retry == "with_attitude" and aided)
         )
         if disagree or unmatched:
             # the model and the scan disagree (or the scan is not within the model's gate at
             # all): is the model wrong (a manoeuvre, an over-confident velocity) or the
             # registration? Register again under the first frame's weak prior; keep that answer
             # only if the scan supports it as well (when nothing matched, if it is usable).
-            # a scan that matched nothing under the model: with the chaser's attitude measured,
-            # only the translation is in doubt; its rotation keeps the measured covariance
-            keep = unmatched and self._aided
+            # When nothing matched and the rotation is measured, only the translation is in
+            # doubt: the prior keeps the measured rotation's covariance.
+            keep = unmatched and aided
             weak = solver.weak_prior(T_pred, P_pp[3:, 3:] if keep else None)
             gate_w = float(max(gate, 3.0 * solver.first_sigma[0]))
             alt = solver.solve(P, T_pred, weak, gate_w, rng, radius, primary=False)
