@@ -1,4 +1,5 @@
-"""SE(3) exponential and logarithm in numba (navigator filter, smoother and GICP; pose graphs).
+"""SE(3) exponential, logarithm, inverse and adjoint in numba (navigator filter, smoother and GICP;
+pose graphs).
 
 Same maps as :func:`relnav.geometry.se3.exp_se3` / :func:`~relnav.geometry.se3.log_se3` (twist
 ``[ρ, φ]``, ``|φ| ≤ π``), without SciPy's ``Rotation`` objects: the filter calls them a few
@@ -90,6 +91,31 @@ def log_se3_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     out[:3] = Ji @ np.ascontiguousarray(T[:3, 3])
     out[3:] = phi
     return out
+
+
+@njit(cache=True)
+def invert_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Inverse of a rigid transform ``T`` (4×4)."""
+    out = np.eye(4)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = T[j, i]
+        out[i, 3] = -(T[0, i] * T[0, 3] + T[1, i] * T[1, 3] + T[2, i] * T[2, 3])
+    return out
+
+
+@njit(cache=True)
+def adjoint_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Adjoint ``[[R, [t]×R], [0, R]]`` (6×6) of ``T`` (twists ``[ρ, φ]``)."""
+    R = np.ascontiguousarray(T[:3, :3])
+    K = np.zeros((3, 3))
+    K[0, 1], K[0, 2], K[1, 2] = -T[2, 3], T[1, 3], -T[0, 3]
+    K[1, 0], K[2, 0], K[2, 1] = T[2, 3], -T[1, 3], T[0, 3]
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[3:, 3:] = R
+    A[:3, 3:] = K @ R
+    return A
 
 
 def exp_se3(xi: np.ndarray) -> np.ndarray:

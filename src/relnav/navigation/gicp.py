@@ -32,8 +32,7 @@ from numba import njit
 from relnav.geometry.eigen import solve_spd6
 from relnav.geometry.icp_kernels import rodrigues_nb
 from relnav.geometry.kdtree import kd_children
-from relnav.geometry.lie import rot_log_nb
-from relnav.geometry.se3 import adjoint
+from relnav.geometry.lie import adjoint_nb, rot_log_nb
 
 if TYPE_CHECKING:
     from relnav.navigation.voxel_map import VoxelMap
@@ -513,13 +512,20 @@ def degeneracy(H: np.ndarray, radius: float) -> float:
     return float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
 
 
-def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
-    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
-    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``)."""
-    Ad = adjoint(T)
+@njit(cache=True)
+def _left_information_nb(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:  # pragma: no cover
+    Ad = adjoint_nb(T)
     S = Ad @ S_body @ Ad.T
     L = np.linalg.pinv(0.5 * (S + S.T))
     return 0.5 * (L + L.T)
+
+
+def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:
+    """Information of a pose at ``T`` whose body-frame covariance is ``S_body`` (6×6), in the
+    left twist of the target frame the solver uses (``S_left = Ad S Adᵀ``, pseudo-inverted)."""
+    return _left_information_nb(
+        np.ascontiguousarray(T, dtype=np.float64), np.ascontiguousarray(S_body, dtype=np.float64)
+    )
 
 
 def normal_information(

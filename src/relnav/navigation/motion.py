@@ -19,11 +19,102 @@ perturbation) and covariance ``P`` (12×12).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-from relnav.geometry.lie import exp_se3, log_se3
-from relnav.geometry.se3 import adjoint, invert
+from relnav.geometry.lie import adjoint_nb, exp_se3, exp_se3_nb, invert_nb, log_se3, log_se3_nb
+from relnav.geometry.se3 import invert
 
 __all__ = ["ConstantVelocityFilter"]
+
+_NO_CLONE = np.zeros((12, 6))
+
+
+@njit(cache=True)
+def _predict_nb(
+    pose: np.ndarray,
+    velocity: np.ndarray,
+    P: np.ndarray,
+    dt: float,
+    sa2: np.ndarray,
+    jitter_var: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:  # pragma: no cover - numba
+    """:meth:`ConstantVelocityFilter.predict`'s arithmetic: the predicted pose, its state
+    covariance (12×12, symmetrised, attitude jitter added), ``F``, ``F P[:, :6]`` and the
+    model's mean rotation variance before the jitter."""
+    step = exp_se3_nb(velocity * dt)
+    F = np.eye(12)
+    F[:6, :6] = adjoint_nb(invert_nb(step))
+    for i in range(6):
+        F[i, 6 + i] = dt
+    FP = F @ P
+    Pn = FP @ F.T
+    for i in range(6):
+        Pn[6 + i, 6 + i] += sa2[i]
+        Pn[i, i] += sa2[i] * dt * dt / 3.0
+    model_rr = (Pn[3, 3] + Pn[4, 4] + Pn[5, 5]) / 3.0
+    for i in range(3, 6):
+        Pn[i, i] += jitter_var
+    return pose @ step, 0.5 * (Pn + Pn.T), F, np.ascontiguousarray(FP[:, :6]), model_rr
+
+
+@njit(cache=True)
+def _step_covariance_nb(
+    pose_prev: np.ndarray, T_new: np.ndarray, P_new: np.ndarray, P_clone: np.ndarray, C: np.ndarray
+) -> np.ndarray:  # pragma: no cover - numba
+    """Covariance (6×6) of the step ``T_prev⁻¹ T_new`` (see
+    :meth:`ConstantVelocityFilter._set_step_covariance`)."""
+    A = adjoint_nb(invert_nb(invert_nb(pose_prev) @ T_new))
+    X = np.ascontiguousarray(C[:6, :]) @ A.T
+    S = np.ascontiguousarray(P_new[:6, :6]) + A @ P_clone @ A.T - X - X.T
+    return 0.5 * (S + S.T)
+
+
+@njit(cache=True)
+def _update_nb(
+    T_pred: np.ndarray,
+    P: np.ndarray,
+    T_star: np.ndarray,
+    H_left: np.ndarray,
+    T0: np.ndarray,
+    jitter: bool,
+    velocity: np.ndarray,
+    pose_prev: np.ndarray,
+    P_clone: np.ndarray,
+    C: np.ndarray,
+    clone: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:  # pragma: no cover - numba
+    """:meth:`ConstantVelocityFilter.update`'s arithmetic: the new velocity, the state
+    covariance, the step's covariance (zeros without ``clone``), the rotation innovation
+    against ``T0`` and the scan's mean rotation variance (both for the jitter, when
+    ``jitter``; ``inf`` for a singular ``H``)."""
+    Ad = adjoint_nb(T_star)
+    H = Ad.T @ H_left @ Ad
+    Ppp = np.ascontiguousarray(P[:6, :6])
+    y = log_se3_nb(invert_nb(T_pred) @ T_star)
+    scan_rr = np.inf
+    y_r = np.zeros(3)
+    if jitter:
+        try:
+            Hi = np.linalg.inv(H)
+            scan_rr = (Hi[3, 3] + Hi[4, 4] + Hi[5, 5]) / 3.0
+        except Exception:
+            scan_rr = np.inf
+        y_r = log_se3_nb(invert_nb(T0) @ T_star)[3:]
+    v = velocity.copy()
+    G = np.zeros((6, 6))
+    try:
+        v = velocity + np.ascontiguousarray(P[6:, :6]) @ np.linalg.solve(Ppp, y)
+        G = H @ np.linalg.inv(Ppp @ H + np.eye(6))
+    except Exception:
+        G = np.zeros((6, 6))
+    Pc = np.ascontiguousarray(P[:, :6])
+    Pr = np.ascontiguousarray(P[:6, :])
+    P_post = P - Pc @ G @ Pr
+    S = np.zeros((6, 6))
+    if clone:
+        C_post = C - Pc @ G @ np.ascontiguousarray(C[:6, :])
+        S = _step_covariance_nb(pose_prev, T_star, P_post, P_clone, C_post)
+    return v, 0.5 * (P_post + P_post.T), S, y_r, scan_rr
 
 
 class ConstantVelocityFilter:
@@ -116,26 +207,18 @@ class ConstantVelocityFilter:
         dt = float(t) - self.t
         if not np.isfinite(dt) or dt <= 0:
             dt = 1e-9
-        step = exp_se3(self.velocity * dt)
-        F = np.eye(12)
-        F[:6, :6] = adjoint(invert(step))
-        F[:6, 6:] = dt * np.eye(6)
-        Q = np.zeros((12, 12))
         sa2 = self.q_scale * self.sigma_acc**2
-        Q[6:, 6:] = np.diag(sa2)
-        Q[:6, :6] = np.diag(sa2 * dt**2) / 3.0
-        P = F @ self.P @ F.T + Q
-        self._model_rr = float(np.mean(np.diag(P)[3:6]))  # before the attitude jitter
-        P[3:6, 3:6] += self.jitter_var * np.eye(3)
+        T_pred, P, F, C, self._model_rr = _predict_nb(
+            self.pose, self.velocity, self.P, dt, sa2, float(self.jitter_var)
+        )
         # stochastic clone of the previous pose error: its covariance and its cross-covariance
         # with the predicted state, for the covariance of the step (see step_covariance)
-        self._clone = (self.P[:6, :6].copy(), F @ self.P[:, :6])
-        T_pred = self.pose @ step
+        self._clone = (self.P[:6, :6].copy(), C)
         self._v_pred = self.velocity.copy()
-        self._pred = (T_pred, 0.5 * (P + P.T), float(t))
+        self._pred = (T_pred, P, float(t))
         self._raw_pred = None
         self._F = F
-        return T_pred.copy(), self._pred[1][:6, :6].copy()
+        return T_pred.copy(), P[:6, :6].copy()
 
     def observe_rotation(
         self, R_meas: np.ndarray, noise: np.ndarray
@@ -226,32 +309,30 @@ class ConstantVelocityFilter:
         """Accept the registered pose ``T*`` with the scan's information ``H`` (left, target)."""
         assert self._pred is not None, "predict() first"
         T_pred, P, t = self._pred
-        Ad = adjoint(T_star)
-        H = Ad.T @ H_left @ Ad
-        Ppp = P[:6, :6]
-        y = log_se3(invert(T_pred) @ T_star)
-        if self.jitter_rate > 0:
-            T0 = self._raw_pred[0] if self._raw_pred else T_pred
-            try:
-                scan_rr = float(np.mean(np.diag(np.linalg.inv(H))[3:]))
-            except np.linalg.LinAlgError:
-                scan_rr = np.inf
-            self.adapt_jitter(log_se3(invert(T0) @ T_star)[3:], scan_rr)
-        try:
-            self.velocity = self.velocity + P[6:, :6] @ np.linalg.solve(Ppp, y)
-            G = H @ np.linalg.inv(Ppp @ H + np.eye(6))
-        except np.linalg.LinAlgError:
-            G = np.zeros((6, 6))
-        P_prior = P
+        T_star = np.ascontiguousarray(T_star, dtype=np.float64)
+        T0 = self._raw_pred[0] if self._raw_pred else T_pred
+        # the previous pose's estimate is not revised here (no smoothing): its error keeps the
+        # clone's covariance Pc; only its correlation with the new state changes
+        Pc, C = self._clone if self._clone is not None else (_NO_CLONE[:6], _NO_CLONE)
+        self.velocity, self.P, S, y_r, scan_rr = _update_nb(
+            T_pred,
+            P,
+            T_star,
+            np.ascontiguousarray(H_left, dtype=np.float64),
+            T0,
+            self.jitter_rate > 0,
+            self.velocity,
+            self.pose,
+            Pc,
+            C,
+            self._clone is not None,
+        )
         if self._clone is not None:
-            Pc, C = self._clone
-            # the previous pose's estimate is not revised here (no smoothing): its error keeps
-            # the covariance Pc; only its correlation with the new state changes
-            C_post = C - P[:, :6] @ G @ C[:6, :]
-            self._set_step_covariance(T_star, P - P[:, :6] @ G @ P[:6, :], Pc, C_post)
-        P = P - P[:, :6] @ G @ P[:6, :]
-        self.P = 0.5 * (P + P.T)
-        self.pose = np.array(T_star, dtype=np.float64)
+            self.step_covariance = S
+        if self.jitter_rate > 0:
+            self.adapt_jitter(y_r, scan_rr)
+        P_prior = P
+        self.pose = T_star.copy()
         self.t = t
         self._record(*(self._raw_pred or (T_pred, P_prior)))
         self._pred = None
@@ -274,10 +355,9 @@ class ConstantVelocityFilter:
         With right perturbations ``T = T̂ exp(δ)``, the step's error is
         ``e = δ_new − Ad(S⁻¹) δ_prev``; ``C`` is ``Cov(state_new, δ_prev)`` (12×6).
         """
-        A = adjoint(invert(invert(self.pose) @ T_new))
-        X = C[:6, :] @ A.T
-        S = P_new[:6, :6] + A @ P_clone @ A.T - X - X.T
-        self.step_covariance = 0.5 * (S + S.T)
+        self.step_covariance = _step_covariance_nb(
+            self.pose, np.ascontiguousarray(T_new), P_new, P_clone, np.ascontiguousarray(C)
+        )
 
     # ------------------------------------------------------------------ fixed-lag smoothing
     def start_smoothing(self, lag: int) -> None:

@@ -63,7 +63,7 @@ from relnav.navigation.pose_graph import LoopCloser
 from relnav.navigation.relocalize import Relocalizer
 from relnav.navigation.repeated import RepeatedPoints
 from relnav.navigation.revisit_check import RevisitCheck
-from relnav.navigation.solver import MapSolver, point_spacing, rms_radius
+from relnav.navigation.solver import MapSolver, median, point_spacing, rms_radius
 from relnav.navigation.startup import StartupCorrection, StartupWindow
 from relnav.navigation.symmetry import (
     SymmetryAxis,
@@ -251,9 +251,11 @@ class Navigator:
         if self.attitude is not None:  # the chaser's measured rotation over the step
             aided = aided_prediction(self.motion, self.attitude, t)
             T_pred, P_pp = aided or (T_pred, P_pp)
-        self.repeats.observe_rays(P, self.spacing0)
+        ranges = np.linalg.norm(P, axis=1)
+        rng = median(ranges)  # the scan's median range, m
+        self.repeats.observe_rays(P, self.spacing0, ranges, rng)
         try:
-            result = self._register(P, T_pred, P_pp, timings, aided=aided is not None)
+            result = self._register(P, T_pred, P_pp, rng, timings, aided=aided is not None)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as e:
             log.warning("frame %d: registration raised %s: %s", self.n_frames, type(e).__name__, e)
             result = RegistrationResult(
@@ -592,7 +594,8 @@ class Navigator:
         Pm = even_subset(P, c.map.max_map_points)
         self.solver.map.insert(Pm @ self.pose[:3, :3].T + self.pose[:3, 3], self.n_frames)
         self.repeats.remember(self.repeats.full_scan, self.pose)
-        self.repeats.observe_rays(P, self.spacing0)
+        ranges = np.linalg.norm(P, axis=1)
+        self.repeats.observe_rays(P, self.spacing0, ranges, median(ranges))
         st0 = c.prior.sigma_first_t * max(rms_radius(P), self.spacing0)
         sr0 = math.radians(c.prior.sigma_first_r_deg)
         sa_t = c.prior.sigma_acc_t * self.spacing0
@@ -625,11 +628,13 @@ class Navigator:
         P: np.ndarray,
         T_pred: np.ndarray,
         P_pp: np.ndarray,
+        rng: float,
         timings: dict,
         aided: bool = False,
     ) -> RegistrationResult:
         """Register the scan ``P`` onto the map from the prediction ``(T_pred, P_pp)`` and judge
-        it (``aided``: the prediction's rotation is the chaser's measured attitude)."""
+        it (``rng``: the scan's median range, m; ``aided``: the prediction's rotation is the
+        chaser's measured attitude)."""
         c = self.config
         assert self.map is not None
         info: dict[str, Any] = {"method": self.name}
@@ -642,7 +647,6 @@ class Navigator:
                 info=info,
             )
         ts = time.perf_counter()
-        rng = float(np.median(np.linalg.norm(P, axis=1)))
         radius = max(rms_radius(P), self.spacing0)
         sigma = np.sqrt(np.maximum(np.diag(P_pp), 0.0))
         Lam = left_information(T_pred, P_pp)

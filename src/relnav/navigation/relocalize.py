@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import logging
 import math
+import statistics
 import time
 from collections import deque
 from dataclasses import dataclass, replace
@@ -384,7 +385,7 @@ class Relocalizer:
         self.lost = 0
         self._doubted = 0
         self._since_attempt = 0
-        self._recent_rms: deque[float] = deque(maxlen=20)
+        self._recent_rms: deque[float] = deque(maxlen=20)  # finite values only
         self._recent_overlap: deque[float] = deque(maxlen=20)
         self._views: list[np.ndarray] = []
         self._map_version = 0
@@ -414,10 +415,12 @@ class Relocalizer:
         c = self.options
         info = result.info
         rms = float(info.get("robust_rms_sigma", float("nan")))
-        ref = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
+        ref = float(statistics.median(self._recent_rms)) if self._recent_rms else float("nan")
         jump = bool(info.get("recovered")) or info.get("chi2_motion", 0.0) > c.chi2 or self.lost > 0
         overlap = float(info.get("overlap", 1.0))
-        ref_overlap = float(np.median(self._recent_overlap)) if self._recent_overlap else 1.0
+        ref_overlap = (
+            float(statistics.median(self._recent_overlap)) if self._recent_overlap else 1.0
+        )
         suspect = (
             result.status == "ok"
             and np.isfinite(ref)
@@ -560,7 +563,9 @@ class Relocalizer:
         if solver.map is None or len(P) < solver.config.solver.min_points:
             return None, "no map or too few points"
         if ref_rms is None:
-            ref_rms = float(np.median(self._recent_rms)) if self._recent_rms else float("nan")
+            ref_rms = (
+                float(statistics.median(self._recent_rms)) if self._recent_rms else float("nan")
+            )
         s0 = solver.spacing0
         model = self._model_description()
         scan = describe(

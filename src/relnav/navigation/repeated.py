@@ -103,16 +103,16 @@ class RepeatedPoints:
         m) and its index."""
         self.full_scan, self.frame = P_full, int(frame)
 
-    def observe_rays(self, P: np.ndarray, spacing0: float) -> bool:
-        """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m);
-        whether they repeat the previous scan's (see the module doc). Sets :attr:`same_rays`
-        and :attr:`ray_fraction`; nothing is done with ``solver.repeat_refine`` off."""
+    def observe_rays(self, P: np.ndarray, spacing0: float, ranges: np.ndarray, rng: float) -> bool:
+        """Record the scan's directions (``P``: sensor frame, m; ``spacing0``: ``s₀``, m;
+        ``ranges``: the points' ranges ``|P|`` (N,), m, and ``rng`` their median); whether they
+        repeat the previous scan's (see the module doc). Sets :attr:`same_rays` and
+        :attr:`ray_fraction`; nothing is done with ``solver.repeat_refine`` off."""
         if self.options.repeat_refine <= 0:
             return False
-        u = P / np.maximum(np.linalg.norm(P, axis=1), 1e-12)[:, None]
+        u = P / np.maximum(ranges, 1e-12)[:, None]
         self.same_rays = False
         if self._rays is not None and len(P):
-            rng = float(np.median(np.linalg.norm(P, axis=1)))
             eps = 0.01 * spacing0 / max(rng, 1e-12)
             _, j, _ = kd_query(*self._rays, u, _EYE, eps, False)
             self.ray_fraction = float(np.count_nonzero(j >= 0)) / len(P)

@@ -33,7 +33,20 @@ from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
-__all__ = ["MapSolver", "point_spacing", "rms_radius"]
+__all__ = ["MapSolver", "median", "point_spacing", "rms_radius"]
+
+
+def median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D array of finite values (the same value, without its overhead:
+    the navigator takes a scan's median range every frame)."""
+    n = len(x)
+    if n == 0:
+        return float("nan")
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2.0)
 
 
 def rms_radius(P: np.ndarray) -> float:

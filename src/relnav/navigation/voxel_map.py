@@ -360,6 +360,75 @@ def _pack(keys: np.ndarray) -> np.ndarray:
     return (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]
 
 
+@njit(cache=True)
+def _cells(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """``np.unique(codes, return_index=True, return_inverse=True)``: the sorted distinct cell
+    codes, the first point of each and each point's cell."""
+    n = len(codes)
+    order = np.argsort(codes, kind="mergesort")
+    uniq, first, inv = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
+    m = -1
+    for r in range(n):
+        i = order[r]
+        if m < 0 or codes[i] != uniq[m]:
+            m += 1
+            uniq[m], first[m] = codes[i], i
+        inv[i] = m
+    return uniq[: m + 1].copy(), first[: m + 1].copy(), inv
+
+
+@njit(cache=True)
+def _merge_sorted(
+    codes: np.ndarray, slots: np.ndarray, new_codes: np.ndarray, new_slots: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """The sorted index ``(codes, slots)`` with the new cells (sorted, none already in it)."""
+    n, m = len(codes), len(new_codes)
+    out_c, out_s = np.empty(n + m, np.int64), np.empty(n + m, np.int64)
+    i = j = 0
+    for k in range(n + m):
+        if j >= m or (i < n and codes[i] < new_codes[j]):
+            out_c[k], out_s[k] = codes[i], slots[i]
+            i += 1
+        else:
+            out_c[k], out_s[k] = new_codes[j], new_slots[j]
+            j += 1
+    return out_c, out_s
+
+
+@njit(cache=True)
+def _accumulate(
+    P: np.ndarray,
+    inv: np.ndarray,
+    slots: np.ndarray,
+    w: np.ndarray,
+    s1: np.ndarray,
+    seen: np.ndarray,
+    frame: int,
+    max_weight: float,
+) -> None:  # pragma: no cover - numba
+    """Add the points ``P`` to their voxels (``slots[inv]``): counts and sums, the old ones
+    forgotten geometrically beyond ``max_weight`` observations (see :meth:`VoxelMap.insert`)."""
+    m = len(slots)
+    w_add, s1_add = np.zeros(m), np.zeros((m, 3))
+    for i in range(len(P)):
+        u = inv[i]
+        w_add[u] += 1.0
+        for d in range(3):
+            s1_add[u, d] += P[i, d]
+    for u in range(m):
+        k = slots[u]
+        w_old = w[k]
+        scale = 1.0
+        if w_old + w_add[u] > max_weight:
+            scale = max(max_weight - w_add[u], 0.0) / max(w_old, 1e-12)
+        w_new = w_old * scale + w_add[u]
+        cap = min(1.0, max_weight / max(w_new, 1e-12))  # one big batch
+        w[k] = w_new * cap
+        for d in range(3):
+            s1[k, d] = (s1[k, d] * scale + s1_add[u, d]) * cap
+        seen[k] = frame
+
+
 class VoxelMap:
     """Voxel map of surface points in the target frame (see the module doc).
 
@@ -463,29 +532,24 @@ class VoxelMap:
             P, keys = P[inside], keys[inside]
             if not len(P):
                 return
-        codes = _pack(keys)
-        uniq, first, inv = np.unique(codes, return_index=True, return_inverse=True)
-        inv = inv.ravel()
+        uniq, first, inv = _cells(_pack(keys))
         slots = self._lookup(uniq)
         new = slots < 0
         if new.any():
             slots[new] = self._append(keys[first[new]])
-            pos = np.searchsorted(self._codes, uniq[new])
-            self._codes = np.insert(self._codes, pos, uniq[new])
-            self._code_slots = np.insert(self._code_slots, pos, slots[new])
-        w_add = np.bincount(inv, minlength=len(uniq)).astype(float)
-        s1_add = np.zeros((len(uniq), 3))
-        np.add.at(s1_add, inv, P)
-        w_old = self._w[slots]
-        over = (w_old + w_add) > self.max_weight
-        scale = np.ones(len(uniq))
-        room = np.maximum(self.max_weight - w_add[over], 0.0)
-        scale[over] = room / np.maximum(w_old[over], 1e-12)
-        w_new = w_old * scale + w_add
-        cap = np.minimum(1.0, self.max_weight / np.maximum(w_new, 1e-12))  # one big batch
-        self._w[slots] = w_new * cap
-        self._s1[slots] = (self._s1[slots] * scale[:, None] + s1_add) * cap[:, None]
-        self._seen[slots] = frame
+            self._codes, self._code_slots = _merge_sorted(
+                self._codes, self._code_slots, uniq[new], slots[new]
+            )
+        _accumulate(
+            np.ascontiguousarray(P),
+            inv,
+            slots,
+            self._w,
+            self._s1,
+            self._seen,
+            frame,
+            self.max_weight,
+        )
         self._touched.update(slots.tolist())
         if self.n > self.max_voxels:
             self._evict()
