@@ -32,7 +32,7 @@ from numba import njit
 from relnav.geometry.eigen import solve_spd6
 from relnav.geometry.icp_kernels import rodrigues_nb
 from relnav.geometry.kdtree import kd_children
-from relnav.geometry.lie import adjoint_nb, rot_log_nb
+from relnav.geometry.lie import adjoint_nb, invert_nb, log_se3_nb, rot_log_nb
 
 if TYPE_CHECKING:
     from relnav.navigation.voxel_map import VoxelMap
@@ -502,14 +502,43 @@ def variance_factor(rms: float) -> float:
     return max(1.0, rms**2) if math.isfinite(rms) else 1.0
 
 
+@njit(cache=True)
+def _degeneracy_nb(H: np.ndarray, radius: float) -> float:  # pragma: no cover - numba
+    sc = np.array([1.0, 1.0, 1.0, 1.0 / radius, 1.0 / radius, 1.0 / radius])
+    Hs = H * sc.reshape(6, 1) * sc.reshape(1, 6)
+    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
+    return ev[0] / ev[-1] if ev[-1] > 0 else 0.0
+
+
 def degeneracy(H: np.ndarray, radius: float) -> float:
     """Ratio of the smallest to the largest eigenvalue of a registration's information ``H``
     (6×6, left twist ``[ρ (m), φ (rad)]``) with its rotations scaled by the lever arm ``radius``
-    (m), so that metres and radians weigh alike; 0 when ``H`` carries no information."""
-    sc = 1.0 / np.array([1.0, 1.0, 1.0, radius, radius, radius])
-    Hs = H * sc[:, None] * sc[None, :]
-    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
-    return float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
+    (m), so that metres and radians weigh alike; 0 when ``H`` carries no information (or is
+    not finite)."""
+    H = np.ascontiguousarray(H, dtype=np.float64)
+    if not np.all(np.isfinite(H)):
+        return 0.0
+    return float(_degeneracy_nb(H, float(radius)))
+
+
+@njit(cache=True)
+def _motion_chi2_nb(
+    T: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray
+) -> float:  # pragma: no cover
+    xi = log_se3_nb(T @ invert_nb(T_pred))
+    return xi @ Lam @ xi
+
+
+def motion_chi2(T: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray) -> float:
+    """χ² of a registered pose ``T`` against the prediction ``T_pred`` under its information
+    ``Lam`` (6×6, left twist of the target frame): ``ξᵀ Λ ξ`` with ``ξ = log(T T_pred⁻¹)``."""
+    return float(
+        _motion_chi2_nb(
+            np.ascontiguousarray(T, dtype=np.float64),
+            np.ascontiguousarray(T_pred, dtype=np.float64),
+            np.ascontiguousarray(Lam, dtype=np.float64),
+        )
+    )
 
 
 @njit(cache=True)

@@ -18,7 +18,7 @@ from relnav.registration.result import RegistrationResult
 if TYPE_CHECKING:
     from relnav.navigation.options import NavigatorConfig
 
-__all__ = ["ambiguity", "disagreement", "exceedance_probability"]
+__all__ = ["ambiguity", "disagreement", "exceedance_probability", "step_sigmas"]
 
 
 @functools.cache
@@ -92,19 +92,42 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
     ``|e_ρ|² ≤ ‖B_ρ‖²_F |z|²``: when that bound stays within the limits for the largest ``|z|``
     among the draws, no draw exceeds them and the result (0) is returned without drawing.
     """
-    C = np.asarray(C, dtype=np.float64)
+    C = np.ascontiguousarray(C, dtype=np.float64)
     if not np.all(np.isfinite(C)):
         return 1.0
-    w, U = np.linalg.eigh(0.5 * (C + C.T))
-    B = U * np.sqrt(np.maximum(w, 0.0))
+    B, b_t, b_r = _square_root(C)
     z2 = _largest_draw_norm2() * (1.0 + 1e-9)  # a margin far above rounding
-    if (
-        float(np.sum(B[:3] ** 2)) * z2 <= limit_t**2
-        and float(np.sum(B[3:] ** 2)) * z2 <= limit_r**2
-    ):
+    if b_t * z2 <= limit_t**2 and b_r * z2 <= limit_r**2:
         return 0.0
     Zt = _unit_normals_by_axis()
-    return _exceed_count(Zt, np.ascontiguousarray(B), limit_t**2, limit_r**2) / Zt.shape[1]
+    return _exceed_count(Zt, B, limit_t**2, limit_r**2) / Zt.shape[1]
+
+
+@njit(cache=True)
+def _square_root(C: np.ndarray) -> tuple[np.ndarray, float, float]:  # pragma: no cover - numba
+    """``B = U √w`` of ``C = U diag(w) Uᵀ`` (6×6, negative eigenvalues as 0) and the squared
+    Frobenius norms of its translation and rotation rows."""
+    w, U = np.linalg.eigh(0.5 * (C + C.T))
+    B = U * np.sqrt(np.maximum(w, 0.0))
+    return B, float(np.sum(B[:3] ** 2)), float(np.sum(B[3:] ** 2))
+
+
+@njit(cache=True)
+def _largest_block_variances(C: np.ndarray) -> tuple[float, float]:  # pragma: no cover - numba
+    """Largest eigenvalue of the translation and of the rotation block of ``C`` (6×6)."""
+    t = np.ascontiguousarray(C[:3, :3])
+    r = np.ascontiguousarray(C[3:, 3:])
+    return np.linalg.eigvalsh(t)[-1], np.linalg.eigvalsh(r)[-1]
+
+
+def step_sigmas(C: np.ndarray) -> tuple[float, float]:
+    """A step's 1σ along its worst translation axis (m) and its worst rotation axis (rad),
+    from its covariance ``C`` (6×6, twist ``[ρ, φ]``); NaN when ``C`` is not finite."""
+    C = np.ascontiguousarray(C, dtype=np.float64)
+    if not np.all(np.isfinite(C)):
+        return float("nan"), float("nan")
+    v_t, v_r = _largest_block_variances(C)
+    return math.sqrt(max(v_t, 0.0)), math.sqrt(max(v_r, 0.0))
 
 
 def ambiguity(

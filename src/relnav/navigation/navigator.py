@@ -49,7 +49,12 @@ from relnav.geometry.lie import log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation.attitude_input import AttitudeInput, aided_prediction
 from relnav.navigation.gicp import left_information
-from relnav.navigation.integrity import ambiguity, disagreement, exceedance_probability
+from relnav.navigation.integrity import (
+    ambiguity,
+    disagreement,
+    exceedance_probability,
+    step_sigmas,
+)
 from relnav.navigation.motion import ConstantVelocityFilter
 from relnav.navigation.multistart import rotated_starts
 from relnav.navigation.options import (
@@ -398,8 +403,8 @@ class Navigator:
         ``integrity.flag_limit_r_deg`` exceeds ``integrity.flag_probability`` becomes ``flagged``
         (the status only: the pose, the filter and the map were updated as for an ``ok`` step)."""
         c = self.config
-        s_t = math.sqrt(max(float(np.linalg.eigvalsh(C[:3, :3])[-1]), 0.0))
-        s_r = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(C[3:, 3:])[-1]), 0.0)))
+        s_t, s_r = step_sigmas(C)
+        s_r = math.degrees(s_r)
         result.info.update(step_sigma_t=s_t, step_sigma_r_deg=s_r, step_covariance=C.copy())
         if result.status != "ok":
             return

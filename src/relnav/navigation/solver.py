@@ -23,6 +23,7 @@ from relnav.navigation.gicp import (
     ScanToMapFit,
     degeneracy,
     left_information,
+    motion_chi2,
     normal_information,
     solve_scan_to_map,
     variance_factor,
@@ -364,7 +365,6 @@ class MapSolver:
             H_cov = fit.H
         has = fit.d2 >= 0
         inl = has & (fit.d2 < 9.0)
-        xi = log_se3(fit.T @ invert(T_pred))
         rms = fit.rms if fit.sw > 0 else float("nan")
         return {
             "T": fit.T,
@@ -374,7 +374,7 @@ class MapSolver:
             "overlap": float(has.sum()) / n,
             "fitness": float(inl.sum()) / n,
             "n_inliers": int(inl.sum()),
-            "chi2": float(xi @ Lam @ xi),
+            "chi2": motion_chi2(fit.T, T_pred, Lam),
             "cond": degeneracy(H_cov, radius),
             "rms": rms,
             "var_factor": variance_factor(rms),
