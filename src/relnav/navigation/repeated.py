@@ -47,12 +47,13 @@ noise (1 cm), so repetition is invisible at that scale.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.spatial import cKDTree
+from numba import njit
 
-from relnav.geometry.kdtree import kd_build_select, kd_query
+from relnav.geometry.kdtree import kd_build_select, kd_knn_within, kd_query
 from relnav.navigation.gicp import ScanToMapFit
 from relnav.navigation.options import SolverOptions
 from relnav.navigation.voxel_map import VoxelMap, even_subset
@@ -68,6 +69,29 @@ RAY_FRACTION = 0.2
 _EYE = np.eye(4)
 PATIENCE = 3
 RETEST = 10
+
+
+@njit(cache=True)
+def _on_previous_rays(
+    X_prev: np.ndarray, X: np.ndarray, j: np.ndarray, origin: np.ndarray, sig2: float
+) -> int:  # pragma: no cover - numba
+    """How many points ``X`` (target frame) have one of their neighbours ``X_prev[j]``
+    (``-1``: none) within ``√sig2`` (m) across the ray from ``origin`` through the point."""
+    count = 0
+    for i in range(len(X)):
+        r0, r1, r2 = X[i, 0] - origin[0], X[i, 1] - origin[1], X[i, 2] - origin[2]
+        nr = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), 1e-12)
+        r0, r1, r2 = r0 / nr, r1 / nr, r2 / nr
+        for k in range(j.shape[1]):
+            if j[i, k] < 0:
+                continue
+            q = j[i, k]
+            d0, d1, d2 = X_prev[q, 0] - X[i, 0], X_prev[q, 1] - X[i, 1], X_prev[q, 2] - X[i, 2]
+            along = d0 * r0 + d1 * r1 + d2 * r2
+            if d0 * d0 + d1 * d1 + d2 * d2 - along * along < sig2:
+                count += 1
+                break
+    return count
 
 
 class RepeatedPoints:
@@ -96,7 +120,9 @@ class RepeatedPoints:
         self.misses = 0  # tested frames in a row without repeated points
         self._rays: tuple[np.ndarray, ...] | None = None  # numba KD-tree of the directions
         self._cloud: tuple[np.ndarray, np.ndarray] | None = None
-        self._tree: cKDTree | None = None
+        self._tree: tuple[np.ndarray, ...] | None = None  # the previous scan, target frame
+        self._iso: np.ndarray | None = None
+        self._iso_sigma = 0.0
 
     def set_scan(self, P_full: np.ndarray, frame: int) -> None:
         """The frame being tracked: its finite points before the point budget (sensor frame,
@@ -230,9 +256,16 @@ class RepeatedPoints:
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
         sig = self.options.repeat_refine * spacing0
-        Om = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (len(voxel_map), 3, 3)))
-        fit = register(P, Om, T0, T_pred, Lam, gate, rng)
+        fit = register(P, self._isotropic(len(voxel_map), sig), T0, T_pred, Lam, gate, rng)
         return fit, self.evidence(P, fit.T, sig, spacing0)
+
+    def _isotropic(self, m: int, sig: float) -> np.ndarray:
+        """``I / sig²`` for ``m`` map points, ``(m, 3, 3)`` (kept between frames: the map grows
+        by a few voxels per frame)."""
+        if self._iso is None or len(self._iso) < m or self._iso_sigma != sig:
+            self._iso = np.ascontiguousarray(np.broadcast_to(np.eye(3) / sig**2, (2 * m, 3, 3)))
+            self._iso_sigma = sig
+        return self._iso[:m]
 
     def evidence(self, P: np.ndarray, T: np.ndarray, sig: float, spacing0: float) -> float:
         """Fraction of the scan ``P`` (sensor frame, pose ``T``) whose points lie on the ray of
@@ -241,17 +274,13 @@ class RepeatedPoints:
         if self._cloud is None or not len(P):
             return 0.0
         Q, T_prev = self._cloud
+        if not len(Q):
+            return 0.0
         if self._tree is None:
-            self._tree = cKDTree(Q @ T_prev[:3, :3].T + T_prev[:3, 3])
-        tree = self._tree
-        X = P @ T[:3, :3].T + T[:3, 3]
-        d, j = tree.query(X, k=min(4, tree.n), distance_upper_bound=spacing0)
-        d, j = d.reshape(len(X), -1), j.reshape(len(X), -1)
-        ok = np.isfinite(d)
-        D = tree.data[np.where(ok, j, 0)] - X[:, None, :]
-        ray = X - T[:3, 3]
-        ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-12)[:, None]
-        along = np.einsum("nkj,nj->nk", D, ray)
-        across2 = np.einsum("nkj,nkj->nk", D, D) - along**2
-        hit = (ok & (across2 < sig**2)).any(axis=1)
-        return float(np.count_nonzero(hit)) / len(P)
+            X_prev = np.ascontiguousarray(Q @ T_prev[:3, :3].T + T_prev[:3, 3])
+            self._tree = (X_prev, *kd_build_select(X_prev, 16))
+        X_prev, *tree = self._tree
+        X = np.ascontiguousarray(P @ T[:3, :3].T + T[:3, 3])
+        _, j = kd_knn_within(*tree, X, min(4, len(X_prev)), np.full(len(X), spacing0**2))
+        hits = _on_previous_rays(X_prev, X, j, np.ascontiguousarray(T[:3, 3]), sig**2)
+        return float(hits) / len(P)
