@@ -34,8 +34,9 @@ from collections import deque
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
-from relnav.geometry.lie import log_se3
+from relnav.geometry.lie import adjoint_nb, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.pose_graph import (
     Keyframe,
@@ -47,6 +48,13 @@ from relnav.navigation.pose_graph import (
 from relnav.odometry.odometry import OdometryStep
 
 __all__ = ["RevisitCheck", "chain_covariance"]
+
+
+@njit(cache=True)
+def _add_moved(S: np.ndarray, T: np.ndarray, C: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """``S + Ad(T) C Ad(T)ᵀ`` (6×6): a step's covariance moved to the target frame, added."""
+    A = adjoint_nb(T)
+    return S + A @ C @ A.T
 
 
 def chain_covariance(S_old: np.ndarray, S_new: np.ndarray, T_new: np.ndarray) -> np.ndarray:
@@ -104,8 +112,7 @@ class RevisitCheck:
         if C is None or not np.all(np.isfinite(C)):
             C = self.closer.fallback_covariance
         T = pose_of(frame)
-        A = adjoint(T)
-        self._S = self._S + A @ C @ A.T
+        self._S = _add_moved(self._S, np.ascontiguousarray(T), np.ascontiguousarray(C))
         if not merged or points is None or len(points) < 3:
             return None
         self._recent.append((frame, np.asarray(points, dtype=np.float64)))

@@ -14,6 +14,7 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from relnav._threads import thread_pool
@@ -50,9 +51,27 @@ def median(x: np.ndarray) -> float:
     return float((part[k - 1] + part[k]) / 2.0)
 
 
+@njit(cache=True)
+def _rms_radius_nb(P: np.ndarray) -> float:  # pragma: no cover - numba
+    n = P.shape[0]
+    c0 = c1 = c2 = 0.0
+    for i in range(n):
+        c0 += P[i, 0]
+        c1 += P[i, 1]
+        c2 += P[i, 2]
+    c0, c1, c2 = c0 / n, c1 / n, c2 / n
+    s = 0.0
+    for i in range(n):
+        d0, d1, d2 = P[i, 0] - c0, P[i, 1] - c1, P[i, 2] - c2
+        s += d0 * d0 + d1 * d1 + d2 * d2
+    return math.sqrt(s / n)
+
+
 def rms_radius(P: np.ndarray) -> float:
-    """RMS distance of the points ``P`` (N, 3) from their centroid (m): the scan's lever arm."""
-    return float(np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, axis=1))))
+    """RMS distance of the points ``P`` (N, 3) from their centroid (m): the scan's lever arm
+    (NaN for no point)."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    return float(_rms_radius_nb(P)) if len(P) else float("nan")
 
 
 def point_spacing(P: np.ndarray) -> float:
