@@ -378,6 +378,23 @@ def _cells(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # p
 
 
 @njit(cache=True)
+def _lookup_sorted(
+    codes: np.ndarray, slots: np.ndarray, query: np.ndarray
+) -> np.ndarray:  # pragma: no cover - numba
+    """Storage slot of each cell code ``query`` in the sorted index ``(codes, slots)`` (-1: not
+    in the map)."""
+    out = np.full(len(query), -1, np.int64)
+    if len(codes) == 0:
+        return out
+    pos = np.searchsorted(codes, query)
+    for i in range(len(query)):
+        p = min(pos[i], len(codes) - 1)
+        if codes[p] == query[i]:
+            out[i] = slots[p]
+    return out
+
+
+@njit(cache=True)
 def _merge_sorted(
     codes: np.ndarray, slots: np.ndarray, new_codes: np.ndarray, new_slots: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
@@ -533,7 +550,7 @@ class VoxelMap:
             if not len(P):
                 return
         uniq, first, inv = _cells(_pack(keys))
-        slots = self._lookup(uniq)
+        slots = _lookup_sorted(self._codes, self._code_slots, uniq)
         new = slots < 0
         if new.any():
             slots[new] = self._append(keys[first[new]])
@@ -554,16 +571,6 @@ class VoxelMap:
         if self.n > self.max_voxels:
             self._evict()
         self._dirty = True
-
-    def _lookup(self, codes: np.ndarray) -> np.ndarray:
-        """Storage slot of each sorted cell code (-1: not in the map)."""
-        out = np.full(len(codes), -1, dtype=np.int64)
-        if not len(self._codes):
-            return out
-        pos = np.minimum(np.searchsorted(self._codes, codes), len(self._codes) - 1)
-        hit = self._codes[pos] == codes
-        out[hit] = self._code_slots[pos[hit]]
-        return out
 
     def _append(self, keys: np.ndarray) -> np.ndarray:
         """New empty voxels for the cells ``keys`` (``(m, 3)`` int64); their slots."""
