@@ -71,6 +71,15 @@ def main(argv: list[str] | None = None) -> int:
         metavar="JSON",
         help="print relnav against its targets (TARGETS) on each sequence of --json files and exit",
     )
+    p.add_argument(
+        "--onto",
+        type=Path,
+        default=None,
+        metavar="JSON",
+        help="merge the runs into this --json file's results (the methods run replace their "
+        "entries, the other methods' are kept: relnav and KISS-ICP timed together beside an "
+        "all-peer run); --json then writes the merged results",
+    )
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if a.scorecard:
@@ -120,6 +129,11 @@ def main(argv: list[str] | None = None) -> int:
                 f"(whole run {q['run_time']:.2f})",
                 flush=True,
             )
+    if a.onto:
+        merged: dict[str, dict[str, Any]] = json.loads(a.onto.read_text())
+        for name, runs in results.items():
+            merged.setdefault(name, {}).update(runs)
+        results = {name: merged[name] for name in merged}
     if a.json:
         a.json.write_text(json.dumps(results, indent=2))
     print()
