@@ -6,7 +6,9 @@ input on two stress sequences, and two paper-1 presets (``paper1``, ``extended``
 sim-voyager) and ``relnav-tumbling``, and keeps per run: the poses (smoothed and causal), every
 step's status, 1σ, exceedance probability and fitness, the metrics against the ground truth and
 the navigator's final report. ``compare`` says which runs differ in which field (bit for bit;
-times left out). Issue 43's refactor was checked this way (41 runs identical).
+times left out) and by how much their positions moved. Issue 43's refactor was checked this way
+(41 runs identical); session 29's compiled bookkeeping moved 39 of them by at most 1.5e-7 m,
+every step's status the same.
 
     python benchmarks/nav/nav_identity.py snapshot --out bench/nav --to before   # old tree
     python benchmarks/nav/nav_identity.py snapshot --out bench/nav --to after    # new tree
@@ -127,7 +129,14 @@ def compare(a: Path, b: Path) -> int:
         x, y = np.load(f), np.load(g)
         diff = [k for k in x.files if not _same(x[k], y[k])]
         if diff:
-            print(f"{f.stem}: {', '.join(diff)} differ")
+            moved = [
+                f"{k} by {np.abs(x[k][:, :3, 3] - y[k][:, :3, 3]).max():.1e} m"
+                for k in ("poses", "causal")
+                if k in diff and x[k].shape == y[k].shape
+            ]
+            print(
+                f"{f.stem}: {', '.join(diff)} differ" + (f" ({', '.join(moved)})" if moved else "")
+            )
             bad += 1
     print(f"{len(files)} runs compared, {bad} differ")
     return bad
