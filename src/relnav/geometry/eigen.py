@@ -1,4 +1,9 @@
-"""Small symmetric eigenproblems in numba (no LAPACK call compiled)."""
+"""Small dense linear algebra in numba without LAPACK: symmetric eigenproblems, inverses and the
+products of the navigator's 4×4–12×12 matrices.
+
+Plain loops: numba compiles them several times faster than ``np.linalg`` calls and ``@`` on
+arrays (a first ``relnav demo`` compiles every kernel), and they are exact to rounding.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,18 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["jacobi_eigh", "solve_spd6"]
+__all__ = [
+    "block",
+    "inverse",
+    "jacobi_eigh",
+    "matmul",
+    "matmul_t",
+    "matmul_tn",
+    "pinv_sym",
+    "solve_spd6",
+    "sym_eigvals",
+    "symmetrize",
+]
 
 
 @njit(cache=True)
@@ -90,3 +106,131 @@ def solve_spd6(A: np.ndarray, b: np.ndarray) -> np.ndarray:  # pragma: no cover 
             s -= L[k, i] * x[k]
         x[i] = s / L[i, i]
     return x
+
+
+@njit(cache=True)
+def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``A @ B`` (2-D, C-contiguous)."""
+    n, k, m = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for p in range(k):
+            a = A[i, p]
+            for j in range(m):
+                out[i, j] += a * B[p, j]
+    return out
+
+
+@njit(cache=True)
+def matmul_t(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``A @ B.T`` (2-D, C-contiguous)."""
+    n, k, m = A.shape[0], A.shape[1], B.shape[0]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for j in range(m):
+            s = 0.0
+            for p in range(k):
+                s += A[i, p] * B[j, p]
+            out[i, j] = s
+    return out
+
+
+@njit(cache=True)
+def matmul_tn(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``A.T @ B`` (2-D, C-contiguous)."""
+    k, n, m = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((n, m))
+    for p in range(k):
+        for i in range(n):
+            a = A[p, i]
+            for j in range(m):
+                out[i, j] += a * B[p, j]
+    return out
+
+
+@njit(cache=True)
+def symmetrize(A: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``(A + Aᵀ) / 2`` of a square matrix."""
+    n = A.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.5 * (A[i, j] + A[j, i])
+    return out
+
+
+@njit(cache=True)
+def block(A: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:  # pragma: no cover
+    """The contiguous copy of ``A[r0:r1, c0:c1]``."""
+    out = np.empty((r1 - r0, c1 - c0))
+    for i in range(r0, r1):
+        for j in range(c0, c1):
+            out[i - r0, j - c0] = A[i, j]
+    return out
+
+
+@njit(cache=True)
+def inverse(A_in: np.ndarray) -> tuple[np.ndarray, bool]:  # pragma: no cover - numba
+    """``A⁻¹`` of a small square matrix by Gauss–Jordan elimination with partial pivoting, and
+    whether it exists: ``False`` (and zeros) when a pivot is exactly zero, where
+    ``np.linalg.inv`` raises ``LinAlgError``."""
+    n = A_in.shape[0]
+    A = A_in.copy()
+    X = np.eye(n)
+    for c in range(n):
+        piv = c
+        for r in range(c + 1, n):
+            if abs(A[r, c]) > abs(A[piv, c]):
+                piv = r
+        if A[piv, c] == 0.0 or not math.isfinite(A[piv, c]):
+            return np.zeros((n, n)), False
+        if piv != c:
+            for j in range(n):
+                A[c, j], A[piv, j] = A[piv, j], A[c, j]
+                X[c, j], X[piv, j] = X[piv, j], X[c, j]
+        d = 1.0 / A[c, c]
+        for j in range(n):
+            A[c, j] *= d
+            X[c, j] *= d
+        for r in range(n):
+            if r != c:
+                f = A[r, c]
+                if f != 0.0:
+                    for j in range(n):
+                        A[r, j] -= f * A[c, j]
+                        X[r, j] -= f * X[c, j]
+    return X, True
+
+
+@njit(cache=True)
+def sym_eigvals(A: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """Eigenvalues of a small symmetric matrix, ascending (:func:`jacobi_eigh`)."""
+    w, _ = jacobi_eigh(A)
+    for i in range(1, len(w)):  # insertion sort: n ≤ 12
+        x = w[i]
+        j = i - 1
+        while j >= 0 and w[j] > x:
+            w[j + 1] = w[j]
+            j -= 1
+        w[j + 1] = x
+    return w
+
+
+@njit(cache=True)
+def pinv_sym(A: np.ndarray, rcond: float = 1e-15) -> np.ndarray:  # pragma: no cover - numba
+    """Pseudo-inverse of a symmetric matrix: ``V diag(1/w) Vᵀ`` over the eigenvalues with
+    ``|w| > rcond · max |w|`` (``np.linalg.pinv``'s rule, its singular values being ``|w|``)."""
+    w, V = jacobi_eigh(A)
+    n = len(w)
+    big = 0.0
+    for i in range(n):
+        big = max(big, abs(w[i]))
+    out = np.zeros((n, n))
+    for k in range(n):
+        if abs(w[k]) > rcond * big:
+            inv = 1.0 / w[k]
+            for i in range(n):
+                a = V[i, k] * inv
+                for j in range(n):
+                    out[i, j] += a * V[j, k]
+    return out

@@ -107,14 +107,16 @@ def invert_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
 @njit(cache=True)
 def adjoint_nb(T: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """Adjoint ``[[R, [t]×R], [0, R]]`` (6×6) of ``T`` (twists ``[ρ, φ]``)."""
-    R = np.ascontiguousarray(T[:3, :3])
-    K = np.zeros((3, 3))
-    K[0, 1], K[0, 2], K[1, 2] = -T[2, 3], T[1, 3], -T[0, 3]
-    K[1, 0], K[2, 0], K[2, 1] = T[2, 3], -T[1, 3], T[0, 3]
+    t0, t1, t2 = T[0, 3], T[1, 3], T[2, 3]
     A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[3:, 3:] = R
-    A[:3, 3:] = K @ R
+    for j in range(3):
+        r0, r1, r2 = T[0, j], T[1, j], T[2, j]
+        A[0, j] = A[3, 3 + j] = r0
+        A[1, j] = A[4, 3 + j] = r1
+        A[2, j] = A[5, 3 + j] = r2
+        A[0, 3 + j] = t1 * r2 - t2 * r1  # [t]× R, column j: t × R[:, j]
+        A[1, 3 + j] = t2 * r0 - t0 * r2
+        A[2, 3 + j] = t0 * r1 - t1 * r0
     return A
 
 

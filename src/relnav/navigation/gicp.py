@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from relnav.geometry.eigen import solve_spd6
+from relnav.geometry.eigen import matmul, matmul_t, pinv_sym, solve_spd6, sym_eigvals, symmetrize
 from relnav.geometry.icp_kernels import rodrigues_nb
 from relnav.geometry.kdtree import kd_children
 from relnav.geometry.lie import adjoint_nb, invert_nb, log_se3_nb, rot_log_nb
@@ -504,10 +504,14 @@ def variance_factor(rms: float) -> float:
 
 @njit(cache=True)
 def _degeneracy_nb(H: np.ndarray, radius: float) -> float:  # pragma: no cover - numba
-    sc = np.array([1.0, 1.0, 1.0, 1.0 / radius, 1.0 / radius, 1.0 / radius])
-    Hs = H * sc.reshape(6, 1) * sc.reshape(1, 6)
-    ev = np.linalg.eigvalsh(0.5 * (Hs + Hs.T))
-    return ev[0] / ev[-1] if ev[-1] > 0 else 0.0
+    Hs = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            si = 1.0 if i < 3 else 1.0 / radius
+            sj = 1.0 if j < 3 else 1.0 / radius
+            Hs[i, j] = 0.5 * (H[i, j] + H[j, i]) * si * sj
+    ev = sym_eigvals(Hs)
+    return ev[0] / ev[5] if ev[5] > 0 else 0.0
 
 
 def degeneracy(H: np.ndarray, radius: float) -> float:
@@ -525,8 +529,12 @@ def degeneracy(H: np.ndarray, radius: float) -> float:
 def _motion_chi2_nb(
     T: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray
 ) -> float:  # pragma: no cover
-    xi = log_se3_nb(T @ invert_nb(T_pred))
-    return xi @ Lam @ xi
+    xi = log_se3_nb(matmul(T, invert_nb(T_pred)))
+    q = 0.0
+    for i in range(6):
+        for j in range(6):
+            q += xi[i] * Lam[i, j] * xi[j]
+    return q
 
 
 def motion_chi2(T: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray) -> float:
@@ -544,9 +552,8 @@ def motion_chi2(T: np.ndarray, T_pred: np.ndarray, Lam: np.ndarray) -> float:
 @njit(cache=True)
 def _left_information_nb(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:  # pragma: no cover
     Ad = adjoint_nb(T)
-    S = Ad @ S_body @ Ad.T
-    L = np.linalg.pinv(0.5 * (S + S.T))
-    return 0.5 * (L + L.T)
+    S = matmul_t(matmul(Ad, S_body), Ad)
+    return symmetrize(pinv_sym(symmetrize(S)))
 
 
 def left_information(T: np.ndarray, S_body: np.ndarray) -> np.ndarray:

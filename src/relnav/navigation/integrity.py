@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
+from relnav.geometry.eigen import block, sym_eigvals
 from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
@@ -95,29 +96,23 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
     C = np.ascontiguousarray(C, dtype=np.float64)
     if not np.all(np.isfinite(C)):
         return 1.0
-    B, b_t, b_r = _square_root(C)
-    z2 = _largest_draw_norm2() * (1.0 + 1e-9)  # a margin far above rounding
-    if b_t * z2 <= limit_t**2 and b_r * z2 <= limit_r**2:
-        return 0.0
-    Zt = _unit_normals_by_axis()
-    return _exceed_count(Zt, B, limit_t**2, limit_r**2) / Zt.shape[1]
-
-
-@njit(cache=True)
-def _square_root(C: np.ndarray) -> tuple[np.ndarray, float, float]:  # pragma: no cover - numba
-    """``B = U √w`` of ``C = U diag(w) Uᵀ`` (6×6, negative eigenvalues as 0) and the squared
-    Frobenius norms of its translation and rotation rows."""
+    # LAPACK's eigenvectors (their order and signs pair each fixed draw with a direction)
     w, U = np.linalg.eigh(0.5 * (C + C.T))
     B = U * np.sqrt(np.maximum(w, 0.0))
-    return B, float(np.sum(B[:3] ** 2)), float(np.sum(B[3:] ** 2))
+    z2 = _largest_draw_norm2() * (1.0 + 1e-9)  # a margin far above rounding
+    if (
+        float(np.sum(B[:3] ** 2)) * z2 <= limit_t**2
+        and float(np.sum(B[3:] ** 2)) * z2 <= limit_r**2
+    ):
+        return 0.0
+    Zt = _unit_normals_by_axis()
+    return _exceed_count(Zt, np.ascontiguousarray(B), limit_t**2, limit_r**2) / Zt.shape[1]
 
 
 @njit(cache=True)
 def _largest_block_variances(C: np.ndarray) -> tuple[float, float]:  # pragma: no cover - numba
     """Largest eigenvalue of the translation and of the rotation block of ``C`` (6×6)."""
-    t = np.ascontiguousarray(C[:3, :3])
-    r = np.ascontiguousarray(C[3:, 3:])
-    return np.linalg.eigvalsh(t)[-1], np.linalg.eigvalsh(r)[-1]
+    return sym_eigvals(block(C, 0, 3, 0, 3))[2], sym_eigvals(block(C, 3, 6, 3, 6))[2]
 
 
 def step_sigmas(C: np.ndarray) -> tuple[float, float]:

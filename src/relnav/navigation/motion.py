@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from relnav.geometry.eigen import block, inverse, matmul, matmul_t, matmul_tn, symmetrize
 from relnav.geometry.lie import adjoint_nb, exp_se3, exp_se3_nb, invert_nb, log_se3, log_se3_nb
 from relnav.geometry.se3 import invert
 
@@ -42,19 +43,21 @@ def _predict_nb(
     covariance (12×12, symmetrised, attitude jitter added), ``F``, ``F P[:, :6]`` and the
     model's mean rotation variance before the jitter."""
     step = exp_se3_nb(velocity * dt)
+    A = adjoint_nb(invert_nb(step))
     F = np.eye(12)
-    F[:6, :6] = adjoint_nb(invert_nb(step))
     for i in range(6):
+        for j in range(6):
+            F[i, j] = A[i, j]
         F[i, 6 + i] = dt
-    FP = F @ P
-    Pn = FP @ F.T
+    FP = matmul(F, P)
+    Pn = matmul_t(FP, F)
     for i in range(6):
         Pn[6 + i, 6 + i] += sa2[i]
         Pn[i, i] += sa2[i] * dt * dt / 3.0
     model_rr = (Pn[3, 3] + Pn[4, 4] + Pn[5, 5]) / 3.0
     for i in range(3, 6):
         Pn[i, i] += jitter_var
-    return pose @ step, 0.5 * (Pn + Pn.T), F, np.ascontiguousarray(FP[:, :6]), model_rr
+    return matmul(pose, step), symmetrize(Pn), F, block(FP, 0, 12, 0, 6), model_rr
 
 
 @njit(cache=True)
@@ -63,10 +66,13 @@ def _step_covariance_nb(
 ) -> np.ndarray:  # pragma: no cover - numba
     """Covariance (6×6) of the step ``T_prev⁻¹ T_new`` (see
     :meth:`ConstantVelocityFilter._set_step_covariance`)."""
-    A = adjoint_nb(invert_nb(invert_nb(pose_prev) @ T_new))
-    X = np.ascontiguousarray(C[:6, :]) @ A.T
-    S = np.ascontiguousarray(P_new[:6, :6]) + A @ P_clone @ A.T - X - X.T
-    return 0.5 * (S + S.T)
+    A = adjoint_nb(invert_nb(matmul(invert_nb(pose_prev), T_new)))
+    X = matmul_t(block(C, 0, 6, 0, 6), A)
+    S = matmul_t(matmul(A, P_clone), A)
+    for i in range(6):
+        for j in range(6):
+            S[i, j] += P_new[i, j] - X[i, j] - X[j, i]
+    return symmetrize(S)
 
 
 @njit(cache=True)
@@ -86,35 +92,41 @@ def _update_nb(
     """:meth:`ConstantVelocityFilter.update`'s arithmetic: the new velocity, the state
     covariance, the step's covariance (zeros without ``clone``), the rotation innovation
     against ``T0`` and the scan's mean rotation variance (both for the jitter, when
-    ``jitter``; ``inf`` for a singular ``H``)."""
+    ``jitter``; ``inf`` for a singular ``H``). A singular ``P_pp`` leaves the velocity and the
+    covariance to the model, a singular ``P_pp H + I`` the covariance."""
     Ad = adjoint_nb(T_star)
-    H = Ad.T @ H_left @ Ad
-    Ppp = np.ascontiguousarray(P[:6, :6])
-    y = log_se3_nb(invert_nb(T_pred) @ T_star)
+    H = matmul(matmul_tn(Ad, H_left), Ad)
+    Ppp = block(P, 0, 6, 0, 6)
+    y = log_se3_nb(matmul(invert_nb(T_pred), T_star))
     scan_rr = np.inf
     y_r = np.zeros(3)
     if jitter:
-        try:
-            Hi = np.linalg.inv(H)
+        Hi, ok = inverse(H)
+        if ok:
             scan_rr = (Hi[3, 3] + Hi[4, 4] + Hi[5, 5]) / 3.0
-        except Exception:
-            scan_rr = np.inf
-        y_r = log_se3_nb(invert_nb(T0) @ T_star)[3:]
+        y_r = log_se3_nb(matmul(invert_nb(T0), T_star))[3:]
     v = velocity.copy()
     G = np.zeros((6, 6))
-    try:
-        v = velocity + np.ascontiguousarray(P[6:, :6]) @ np.linalg.solve(Ppp, y)
-        G = H @ np.linalg.inv(Ppp @ H + np.eye(6))
-    except Exception:
-        G = np.zeros((6, 6))
-    Pc = np.ascontiguousarray(P[:, :6])
-    Pr = np.ascontiguousarray(P[:6, :])
-    P_post = P - Pc @ G @ Pr
+    Pi, ok = inverse(Ppp)
+    if ok:
+        K = matmul(block(P, 6, 12, 0, 6), Pi)
+        for i in range(6):
+            for j in range(6):
+                v[i] += K[i, j] * y[j]
+        M = matmul(Ppp, H)
+        for i in range(6):
+            M[i, i] += 1.0
+        Mi, ok = inverse(M)
+        if ok:
+            G = matmul(H, Mi)
+    Pc = block(P, 0, 12, 0, 6)
+    PcG = matmul(Pc, G)
+    P_post = P - matmul(PcG, block(P, 0, 6, 0, 12))
     S = np.zeros((6, 6))
     if clone:
-        C_post = C - Pc @ G @ np.ascontiguousarray(C[:6, :])
+        C_post = C - matmul(PcG, block(C, 0, 6, 0, 6))
         S = _step_covariance_nb(pose_prev, T_star, P_post, P_clone, C_post)
-    return v, 0.5 * (P_post + P_post.T), S, y_r, scan_rr
+    return v, symmetrize(P_post), S, y_r, scan_rr
 
 
 class ConstantVelocityFilter:

@@ -36,6 +36,7 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
+from relnav.geometry.eigen import matmul, matmul_t
 from relnav.geometry.lie import adjoint_nb, log_se3
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.pose_graph import (
@@ -54,7 +55,7 @@ __all__ = ["RevisitCheck", "chain_covariance"]
 def _add_moved(S: np.ndarray, T: np.ndarray, C: np.ndarray) -> np.ndarray:  # pragma: no cover
     """``S + Ad(T) C Ad(T)ᵀ`` (6×6): a step's covariance moved to the target frame, added."""
     A = adjoint_nb(T)
-    return S + A @ C @ A.T
+    return S + matmul_t(matmul(A, C), A)
 
 
 def chain_covariance(S_old: np.ndarray, S_new: np.ndarray, T_new: np.ndarray) -> np.ndarray:
