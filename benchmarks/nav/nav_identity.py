@@ -7,8 +7,8 @@ sim-voyager) and ``relnav-tumbling``, and keeps per run: the poses (smoothed and
 step's status, 1σ, exceedance probability and fitness, the metrics against the ground truth and
 the navigator's final report. ``compare`` says which runs differ in which field (bit for bit;
 times left out) and by how much their positions moved. Issue 43's refactor was checked this way
-(41 runs identical); session 29's compiled bookkeeping moved 39 of them by at most 1.5e-7 m,
-every step's status the same.
+(41 runs identical); session 29's compiled bookkeeping moved 39 of them by at most 3.2e-8 m
+causal (4.8e-6 m smoothed), every step's status the same.
 
     python benchmarks/nav/nav_identity.py snapshot --out bench/nav --to before   # old tree
     python benchmarks/nav/nav_identity.py snapshot --out bench/nav --to after    # new tree
