@@ -12,6 +12,8 @@ navigation benchmarks share; this script is its command line.
 
     python benchmarks/nav/nav_suite.py --out bench/nav                  # all sequences, all methods
     python benchmarks/nav/nav_suite.py --out bench/nav --only eros --methods relnav,kiss-icp
+    python benchmarks/nav/nav_suite.py --out bench/nav --methods relnav,kiss-icp \
+        --onto docs/results/nav/suite_causal.json --json docs/results/nav/suite_causal.json
 
 The script simulates each sequence once (cached in ``OUT/sequences``), runs every method once
 untimed on the first sequence's first frames (so that one-off loading is not charged to that
