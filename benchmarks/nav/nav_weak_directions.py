@@ -40,17 +40,17 @@ from relnav.bench.nav_suite import (
 
 PERTURBATIONS: list[dict[str, str]] = [
     {},
-    {"kernel": "2.9"},
-    {"kernel": "3.1"},
-    {"kernel_decay": "0.58"},
-    {"kernel_decay": "0.62"},
-    {"max_iter": "32"},
-    {"kernel": "2.95"},
-    {"kernel": "3.05"},
-    {"kernel_decay": "0.59"},
-    {"kernel_decay": "0.61"},
-    {"max_iter": "31"},
-    {"max_iter": "33"},
+    {"solver.kernel": "2.9"},
+    {"solver.kernel": "3.1"},
+    {"solver.kernel_decay": "0.58"},
+    {"solver.kernel_decay": "0.62"},
+    {"solver.max_iter": "32"},
+    {"solver.kernel": "2.95"},
+    {"solver.kernel": "3.05"},
+    {"solver.kernel_decay": "0.59"},
+    {"solver.kernel_decay": "0.61"},
+    {"solver.max_iter": "31"},
+    {"solver.max_iter": "33"},
 ]
 
 
