@@ -243,3 +243,15 @@ def test_repeated_point_evidence_matches_scipys_search() -> None:
     got = rp.evidence(P, T, sig, s0)
     assert got == _reference_evidence(Q, T_prev, P, T, sig, s0)
     assert 0.4 <= got <= 0.6  # the repeated half, not the fresh one
+
+
+def test_map_insert_drops_points_beyond_the_cell_range() -> None:
+    """Cells beyond ±2²⁰ per axis (and non-finite points) cannot be packed: they are dropped, the
+    others inserted as usual."""
+    vm = VoxelMap(0.5)
+    P = np.array([[0.1, 0.2, 0.3], [1e9, 0.0, 0.0], [np.nan, 0.0, 0.0], [-0.7, 0.2, 0.3]])
+    vm.insert(P, 0)
+    assert len(vm) == 2
+    np.testing.assert_allclose(np.sort(vm.means[:, 0]), [-0.7, 0.1])
+    vm.insert(np.array([[2e9, 0.0, 0.0]]), 1)  # nothing left to insert: unchanged
+    assert len(vm) == 2

@@ -18,6 +18,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from relnav._threads import thread_pool
+from relnav.geometry.eigen import inverse
 from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.se3 import invert
 from relnav.navigation.gicp import (
@@ -122,10 +123,8 @@ class MapSolver:
         """The step's :class:`RegistrationResult` from a registration ``fit`` (:meth:`solve`):
         pose ``T``, covariance ``(H + prior)⁻¹`` of the scan's information ``H`` and the
         prior's (left twist, target frame; ``None`` when singular)."""
-        try:
-            cov = np.linalg.inv(H + prior)
-        except np.linalg.LinAlgError:
-            cov = None
+        inv, ok = inverse(np.ascontiguousarray(H + prior, dtype=np.float64))
+        cov = inv if ok else None
         return RegistrationResult(
             T_target_source=T,
             covariance=cov,

@@ -361,6 +361,30 @@ def _pack(keys: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _cell_codes(
+    P: np.ndarray, voxel: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Each point's cell ``⌊p / voxel⌋`` (int64), its packed code (:func:`_pack`) and whether
+    the cell is within the codes' range (``|key| < 2²⁰`` per axis)."""
+    n = P.shape[0]
+    keys = np.empty((n, 3), np.int64)
+    codes = np.zeros(n, np.int64)
+    inside = np.ones(n, np.bool_)
+    for i in range(n):
+        for d in range(3):
+            k = np.floor(P[i, d] / voxel)
+            if not abs(k) < _HALF:  # also NaN
+                inside[i] = False
+                k = 0.0
+            keys[i, d] = np.int64(k)
+        if inside[i]:
+            codes[i] = (
+                ((keys[i, 0] + _HALF) << 42) | ((keys[i, 1] + _HALF) << 21) | (keys[i, 2] + _HALF)
+            )
+    return keys, codes, inside
+
+
+@njit(cache=True)
 def _cells(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """``np.unique(codes, return_index=True, return_inverse=True)``: the sorted distinct cell
     codes, the first point of each and each point's cell."""
@@ -542,14 +566,13 @@ class VoxelMap:
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if not len(P):
             return
-        keys = np.floor(P / self.voxel_size).astype(np.int64)
-        inside = np.all(np.abs(keys) < _HALF, axis=1)
+        keys, codes, inside = _cell_codes(np.ascontiguousarray(P), self.voxel_size)
         if not inside.all():
             log.warning("%d points beyond the map's cell range dropped", int((~inside).sum()))
-            P, keys = P[inside], keys[inside]
+            P, keys, codes = P[inside], keys[inside], codes[inside]
             if not len(P):
                 return
-        uniq, first, inv = _cells(_pack(keys))
+        uniq, first, inv = _cells(codes)
         slots = _lookup_sorted(self._codes, self._code_slots, uniq)
         new = slots < 0
         if new.any():
