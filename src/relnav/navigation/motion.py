@@ -343,10 +343,9 @@ class ConstantVelocityFilter:
             self.step_covariance = S
         if self.jitter_rate > 0:
             self.adapt_jitter(y_r, scan_rr)
-        P_prior = P
         self.pose = T_star.copy()
         self.t = t
-        self._record(*(self._raw_pred or (T_pred, P_prior)))
+        self._record(*(self._raw_pred or (T_pred, P)))
         self._pred = None
 
     def skip(self) -> None:

@@ -354,21 +354,19 @@ _FAR = np.full((1, 3), 1e18)
 _HALF = 1 << 20  # cells per axis on each side of the origin that a packed code can hold
 
 
-def _pack(keys: np.ndarray) -> np.ndarray:
+@njit(cache=True)
+def _pack(keys: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """One int64 per voxel cell (21 bits per axis), ordered as the cells lexicographically."""
     k = keys.astype(np.int64) + _HALF
     return (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]
 
 
 @njit(cache=True)
-def _cell_codes(
-    P: np.ndarray, voxel: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Each point's cell ``⌊p / voxel⌋`` (int64), its packed code (:func:`_pack`) and whether
-    the cell is within the codes' range (``|key| < 2²⁰`` per axis)."""
+def _cell_keys(P: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """Each point's cell ``⌊p / voxel⌋`` (int64; 0 on an axis out of range) and whether the
+    cell is within :func:`_pack`'s range (``|key| < 2²⁰`` per axis; not for a NaN)."""
     n = P.shape[0]
     keys = np.empty((n, 3), np.int64)
-    codes = np.zeros(n, np.int64)
     inside = np.ones(n, np.bool_)
     for i in range(n):
         for d in range(3):
@@ -377,11 +375,7 @@ def _cell_codes(
                 inside[i] = False
                 k = 0.0
             keys[i, d] = np.int64(k)
-        if inside[i]:
-            codes[i] = (
-                ((keys[i, 0] + _HALF) << 42) | ((keys[i, 1] + _HALF) << 21) | (keys[i, 2] + _HALF)
-            )
-    return keys, codes, inside
+    return keys, inside
 
 
 @njit(cache=True)
@@ -566,13 +560,13 @@ class VoxelMap:
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if not len(P):
             return
-        keys, codes, inside = _cell_codes(np.ascontiguousarray(P), self.voxel_size)
+        keys, inside = _cell_keys(np.ascontiguousarray(P), self.voxel_size)
         if not inside.all():
             log.warning("%d points beyond the map's cell range dropped", int((~inside).sum()))
-            P, keys, codes = P[inside], keys[inside], codes[inside]
+            P, keys = P[inside], keys[inside]
             if not len(P):
                 return
-        uniq, first, inv = _cells(codes)
+        uniq, first, inv = _cells(_pack(keys))
         slots = _lookup_sorted(self._codes, self._code_slots, uniq)
         new = slots < 0
         if new.any():
