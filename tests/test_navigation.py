@@ -404,6 +404,33 @@ def test_exceedance_probability_counts_the_fixed_draws_exactly(rng):
     assert shortcut >= 20  # the smallest covariances take the shortcut, and it says 0
 
 
+def test_exceedance_probability_counts_only_draws_that_can_pass_a_limit(rng):
+    """Counting only the draws long enough to pass a limit by the eigenvalue bound gives the
+    same count as counting every draw, draw for draw, on covariances whose 1σ ellipsoid spans
+    the limits (where the bound prunes some draws and keeps others)."""
+    from relnav.navigation.integrity import (
+        _draws_by_norm,
+        _draws_that_can_exceed,
+        _exceed_count,
+        _unit_normals,
+    )
+
+    Z_all = np.ascontiguousarray(_unit_normals().T)
+    Zt, z2 = _draws_by_norm()
+    lt2, lr2 = 0.5**2, math.radians(5) ** 2
+    pruned = 0
+    for scale in np.geomspace(0.03, 0.5, 40):
+        A = rng.standard_normal((6, 6)) * scale
+        A[3:] *= math.radians(5) / 0.5  # rotations at the same share of their limit
+        w, U = np.linalg.eigh(A @ A.T)
+        B = np.ascontiguousarray(U * np.sqrt(np.maximum(w, 0.0)))
+        n = _draws_that_can_exceed(B, z2, lt2, lr2)
+        every = _exceed_count(Z_all, B, lt2, lr2, Z_all.shape[1])
+        assert _exceed_count(Zt, B, lt2, lr2, n) == every
+        pruned += 0 < n < len(z2)
+    assert pruned >= 10  # the comparison covered partly pruned counts, not only all or none
+
+
 def test_normal_information_drops_the_in_plane_pull(rng):
     """On a flat patch the normals fix only z, roll and pitch: the normal-only information has
     no translation along the plane and no rotation about its normal, the solver's has."""

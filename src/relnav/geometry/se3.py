@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from relnav.errors import InputError
+from relnav.geometry.lie import invert_nb
 from relnav.geometry.rotations import hat, matrix_to_rotvec, rotvec_to_matrix
 
 __all__ = [
@@ -48,6 +49,8 @@ def compose(*Ts: np.ndarray) -> np.ndarray:
 def invert(T: np.ndarray) -> np.ndarray:
     """Inverse of rigid transform(s) ``T`` (``(4, 4)`` or ``(N, 4, 4)``), exact for SE(3)."""
     T = np.asarray(T, dtype=np.float64)
+    if T.shape == (4, 4):  # one transform: the compiled inverse, the same numbers
+        return invert_nb(np.ascontiguousarray(T))
     R = T[..., :3, :3]
     t = T[..., :3, 3]
     Rt = np.swapaxes(R, -1, -2)

@@ -29,10 +29,11 @@ def _unit_normals(n: int = 4096) -> np.ndarray:
 
 
 @njit(cache=True)
-def _exceed_count(Zt: np.ndarray, B: np.ndarray, limit_t2: float, limit_r2: float) -> int:
-    """How many draws ``e = B z`` (``z`` the columns of ``Zt``, (6, n)) have
-    ``|e[:3]|² > limit_t2`` or ``|e[3:]|² > limit_r2``."""
-    n = Zt.shape[1]
+def _exceed_count(
+    Zt: np.ndarray, B: np.ndarray, limit_t2: float, limit_r2: float, n: int
+) -> int:  # pragma: no cover - numba
+    """How many of the first ``n`` draws ``e = B z`` (``z`` the columns of ``Zt``, (6, ≥ n))
+    have ``|e[:3]|² > limit_t2`` or ``|e[3:]|² > limit_r2``."""
     s_t, s_r = np.zeros(n), np.zeros(n)
     for r in range(6):  # two loops, not one on an alias of either: numba vectorises these
         b0, b1, b2, b3, b4, b5 = B[r, 0], B[r, 1], B[r, 2], B[r, 3], B[r, 4], B[r, 5]
@@ -52,17 +53,43 @@ def _exceed_count(Zt: np.ndarray, B: np.ndarray, limit_t2: float, limit_r2: floa
     return count
 
 
-@functools.cache
-def _unit_normals_by_axis() -> np.ndarray:
-    """:func:`_unit_normals` transposed, ``(6, n)`` C-contiguous."""
-    return np.ascontiguousarray(_unit_normals().T)
+@njit(cache=True)
+def _draws_that_can_exceed(
+    B: np.ndarray, z2_desc: np.ndarray, limit_t2: float, limit_r2: float
+) -> int:  # pragma: no cover - numba
+    """How many of the draws, sorted by squared norm ``z2_desc`` (descending), could exceed a
+    limit: ``|B_ρ z|² ≤ λ_max(B_ρ B_ρᵀ) |z|²`` (and the same for ``φ``), so a draw whose
+    ``|z|²`` keeps both bounds within the limits (by a relative margin of 1e-9, far above
+    rounding) cannot, nor can any shorter one."""
+    lam = np.empty(2)
+    for blk in range(2):
+        G = np.empty((3, 3))
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for k in range(6):
+                    s += B[3 * blk + i, k] * B[3 * blk + j, k]
+                G[i, j] = s
+        lam[blk] = max(sym_eigvals(G)[2], 0.0) * (1.0 + 1e-9)
+    thr = np.inf  # draws with |z|² > thr may exceed a limit
+    if lam[0] > 0.0:
+        thr = min(thr, limit_t2 / lam[0])
+    if lam[1] > 0.0:
+        thr = min(thr, limit_r2 / lam[1])
+    n = 0
+    while n < z2_desc.shape[0] and z2_desc[n] > thr:
+        n += 1
+    return n
 
 
 @functools.cache
-def _largest_draw_norm2() -> float:
-    """The largest squared norm among :func:`_unit_normals`' draws."""
+def _draws_by_norm() -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_unit_normals` ordered by squared norm, longest first: the draws by axis
+    ``(6, n)`` C-contiguous and their squared norms ``(n,)``."""
     z = _unit_normals()
-    return float(np.max(np.einsum("ij,ij->i", z, z)))
+    z2 = np.einsum("ij,ij->i", z, z)
+    order = np.argsort(-z2, kind="stable")
+    return np.ascontiguousarray(z[order].T), np.ascontiguousarray(z2[order])
 
 
 def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> float:
@@ -90,23 +117,21 @@ def exceedance_probability(C: np.ndarray, limit_t: float, limit_r: float) -> flo
     The two norms are correlated through ``C``'s off-diagonal block, so the joint event is
     counted on draws of the whole twist (no closed form for a union of two generalised χ²).
     A draw's error is ``e = B z`` with ``B = U √w`` (``C = U diag(w) Uᵀ``), so
-    ``|e_ρ|² ≤ ‖B_ρ‖²_F |z|²``: when that bound stays within the limits for the largest ``|z|``
-    among the draws, no draw exceeds them and the result (0) is returned without drawing.
+    ``|e_ρ|² ≤ λ_max(B_ρ B_ρᵀ) |z|²`` (the same for ``φ``): only the draws long enough to pass
+    a limit by that bound are counted (:func:`_draws_that_can_exceed`; the others cannot), the
+    same count as over all of them, and none (the result 0) when no draw is long enough.
     """
     C = np.ascontiguousarray(C, dtype=np.float64)
     if not np.all(np.isfinite(C)):
         return 1.0
     # LAPACK's eigenvectors (their order and signs pair each fixed draw with a direction)
     w, U = np.linalg.eigh(0.5 * (C + C.T))
-    B = U * np.sqrt(np.maximum(w, 0.0))
-    z2 = _largest_draw_norm2() * (1.0 + 1e-9)  # a margin far above rounding
-    if (
-        float(np.sum(B[:3] ** 2)) * z2 <= limit_t**2
-        and float(np.sum(B[3:] ** 2)) * z2 <= limit_r**2
-    ):
+    B = np.ascontiguousarray(U * np.sqrt(np.maximum(w, 0.0)))
+    Zt, z2 = _draws_by_norm()
+    n = _draws_that_can_exceed(B, z2, limit_t**2, limit_r**2)
+    if n == 0:
         return 0.0
-    Zt = _unit_normals_by_axis()
-    return _exceed_count(Zt, np.ascontiguousarray(B), limit_t**2, limit_r**2) / Zt.shape[1]
+    return _exceed_count(Zt, B, limit_t**2, limit_r**2, n) / Zt.shape[1]
 
 
 @njit(cache=True)
