@@ -289,14 +289,29 @@ def test_rotated_starts_turn_the_prediction_about_each_sensor_axis():
     assert all(np.allclose(S[:3, 3], T[:3, 3]) for S in starts)  # about the sensor's origin
 
 
-def test_jitter_starts_hold_the_navigator_under_jitter(jittered):
-    """Without the attitude input: the extra starts lower the rotation step error."""
-    seq = ScanSequence(jittered)
+@pytest.fixture(scope="module")
+def jittered_longer(tmp_path_factory):
+    """The flash orbit of :func:`jittered` over 40 frames with 1.5° white attitude jitter."""
+    out = tmp_path_factory.mktemp("jitter15") / "seq"
+    sc = flash_orbit("jit", max_frames=40)
+    sc["pointing"] = {"jitter_deg": 1.5, "attitude_sigma_deg": 0.01}
+    simulate(sc, out)
+    return out
+
+
+def test_jitter_starts_hold_the_navigator_under_jitter(jittered_longer):
+    """Without the attitude input: the extra starts (screened on a third of the scan, the
+    default) lower the rotation step error, as registering every start on the whole scan does
+    (RMS 6.72° both, 8.18° without the starts, measured)."""
+    seq = ScanSequence(jittered_longer)
     on = run_sequence(seq, "relnav")
+    every = run_sequence(seq, "relnav", **{"prior.jitter_screen": 1})
     off = run_sequence(seq, "relnav", **{"prior.jitter_starts": 0})
-    e_on = _rotation_step_errors_deg(on.online_poses, seq.gt_poses)
-    e_off = _rotation_step_errors_deg(off.online_poses, seq.gt_poses)
-    assert np.sqrt(np.mean(e_on**2)) < np.sqrt(np.mean(e_off**2))  # 0.28 vs 0.30° measured
+    rms = [
+        float(np.sqrt(np.mean(_rotation_step_errors_deg(r.online_poses, seq.gt_poses) ** 2)))
+        for r in (on, every, off)
+    ]
+    assert rms[0] < 0.9 * rms[2] and rms[1] < 0.9 * rms[2]
 
 
 def test_extra_starts_give_the_same_answers_in_two_threads(jittered):

@@ -25,8 +25,8 @@ def _box(rng: np.random.Generator, n: int = 600) -> np.ndarray:
     return P + np.array([0.0, 0.0, 20.0]) + rng.normal(scale=0.01, size=P.shape)
 
 
-def _solver(threads: int, P_map: np.ndarray) -> MapSolver:
-    config = navigator_config({"solver.threads": threads})
+def _solver(threads: int, P_map: np.ndarray, screen: int = 1) -> MapSolver:
+    config = navigator_config({"solver.threads": threads, "prior.jitter_screen": screen})
     solver = MapSolver(config, RepeatedPoints(config.solver))
     solver.spacing0 = point_spacing(P_map)
     solver.map = solver.new_map()
@@ -73,3 +73,29 @@ def test_an_unusable_first_answer_stands_alone(threads):
     starts = rotated_starts(T_pred, np.radians(0.5), 1)
     answers = _solver(threads, P_map).solve_starts(far, T_pred, Lam, 3.0, 20.0, 2.0, Lam, starts)
     assert len(answers) == 1 and not answers[0]["usable"]
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_screened_starts_are_the_best_fitting_subset_answers_registered_on_the_whole_scan(
+    threads,
+):
+    """With ``prior.jitter_screen`` = 3 every start is registered on every third scan point;
+    the ``jitter_screen_keep`` (2) of lowest robust RMS there are registered on the whole scan
+    from where they ended, and only they follow the first answer."""
+    rng = np.random.default_rng(6)
+    P_map, P = _box(rng), _box(rng)
+    T_true = exp_se3(np.array([0.05, -0.03, 0.02, 0.0, 0.01, -0.005]))
+    Q = P @ T_true[:3, :3].T + T_true[:3, 3]
+    T_pred, Lam = np.eye(4), _prior(np.eye(4))
+    starts = rotated_starts(T_pred, np.radians(1.0), 2)
+    solver = _solver(threads, P_map, screen=3)
+    answers = solver.solve_starts(Q, T_pred, Lam, 3.0, 20.0, 2.0, Lam, starts)
+    assert len(answers) == 1 + 2 and all(a["usable"] for a in answers)
+    ref = _solver(1, P_map, screen=3)
+    info = ref.map.information
+    sub = [ref.register_on_map(Q[::3], info, S, T_pred, Lam, 3.0, 20.0) for S in starts]
+    rms = np.array([f.rms for f in sub])
+    assert len(np.unique(rms)) > 1  # the starts did end in different places
+    for a, j in zip(answers[1:], np.argsort(rms, kind="stable")[:2], strict=True):
+        whole = ref.register_on_map(Q, info, sub[j].T, T_pred, Lam, 3.0, 20.0)
+        np.testing.assert_array_equal(a["T"], whole.T)

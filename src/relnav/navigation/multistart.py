@@ -9,6 +9,12 @@ jitter's 1σ per axis) and keeps the answer the scan fits best (lowest robust RM
 the stress group (causal, ``nav_suite.py --stress``): envisat-jitter1 wrong steps 50 → 10,
 envisat-jitter2 97 → 55, envisat-jitter0.5 5 → 0; ``k = 1.5`` alone or ``2.5`` alone did worse
 (15 and 28 wrong on envisat-jitter1).
+
+**[interpretation]** The starts are screened by default (``prior.jitter_screen``,
+:meth:`relnav.navigation.solver.MapSolver.solve_starts`): each is registered on every third scan
+point, and only the two that fit those points best are registered on the whole scan; this halves
+a jittered frame's time with wrong steps fewer or within the perturbations' spread
+(docs/navigator.md, session 30).
 """
 
 from __future__ import annotations

@@ -247,6 +247,15 @@ class PriorOptions(_Section):
     jitter_start_min_deg: float = Field(
         0.3, ge=0, le=90, description="Learned jitter 1σ from which the extra starts run, deg."
     )
+    jitter_screen: int = Field(
+        3,
+        ge=1,
+        description="Screen the extra starts on every n-th scan point, then register the best "
+        "on the whole scan (1: every start on the whole scan).",
+    )
+    jitter_screen_keep: int = Field(
+        2, ge=1, description="Screened extra starts registered on the whole scan."
+    )
     smooth_lag: int = Field(
         20, ge=0, description="Fixed-lag smoother's lag, frames (0: no smoothed trajectory)."
     )

@@ -310,8 +310,14 @@ class MapSolver:
         starts: list[np.ndarray],
     ) -> list[dict[str, Any]]:
         """The frame's registration from the prediction (as :meth:`solve` with ``primary``) and,
-        when that one is usable, from each of the other ``starts`` (4, 4) (as :meth:`solve`
-        with ``start``): the answers in that order, or the first alone.
+        when that one is usable, from the other ``starts`` (4, 4) (as :meth:`solve` with
+        ``start``): the answers in that order, or the first alone.
+
+        **[interpretation]** With ``prior.jitter_screen`` = n > 1 the other starts are screened:
+        each is registered on every n-th scan point only, and the ``prior.jitter_screen_keep``
+        that fit those points best (lowest robust RMS) are registered on the whole scan from
+        where they ended; only these answers follow the first. With n = 1 every start is
+        registered on the whole scan.
 
         With ``solver.threads`` > 1 the registrations run together in a
         :func:`~relnav._threads.thread_pool` (the compiled solver releases the interpreter; the
@@ -320,20 +326,38 @@ class MapSolver:
         """
         assert self.map is not None
         info = self.map.information  # refreshes all the map's lazy arrays, before any thread
+        pr = self.config.prior
+        n_screen = int(pr.jitter_screen)
+        screen = n_screen > 1 and len(starts) > pr.jitter_screen_keep
+        Q = np.ascontiguousarray(P[::n_screen]) if screen else P
 
         def register(T0: np.ndarray) -> ScanToMapFit:
             return self.register_on_map(P, info, T0, T_pred, Lam_fit, gate, rng)
 
+        def register_screened(T0: np.ndarray) -> ScanToMapFit:
+            return self.register_on_map(Q, info, T0, T_pred, Lam_fit, gate, rng)
+
         def figures(fit: ScanToMapFit, primary: bool) -> dict[str, Any]:
             return self._figures(P, fit, T_pred, Lam, Lam_fit, gate, rng, radius, primary, None)
 
+        solve_other = register_screened if screen else register
         pool = thread_pool(self.config.solver.threads)
-        together = list(pool.map(register, [T_pred, *starts])) if pool is not None else None
-        first = figures(together[0] if together is not None else register(T_pred), True)
+        if pool is not None:
+            jobs = [pool.submit(register, T_pred), *(pool.submit(solve_other, T) for T in starts)]
+            first_fit, others = jobs[0].result(), [j.result() for j in jobs[1:]]
+        else:
+            first_fit, others = register(T_pred), []
+        first = figures(first_fit, True)
         if not first["usable"]:
             return [first]
-        others = together[1:] if together is not None else [register(T0) for T0 in starts]
-        return [first, *(figures(fit, False) for fit in others)]
+        if pool is None:
+            others = [solve_other(T0) for T0 in starts]
+        if not screen:
+            return [first, *(figures(fit, False) for fit in others)]
+        best = sorted(range(len(others)), key=lambda j: others[j].rms)[: pr.jitter_screen_keep]
+        kept = [others[j].T for j in best]
+        refined = list(pool.map(register, kept)) if pool is not None else map(register, kept)
+        return [first, *(figures(fit, False) for fit in refined)]
 
     def _figures(
         self,
