@@ -76,6 +76,7 @@ EXPECTED = {
         "aura-vbar-coast",
         "envisat-vbar-burn0.1",
     ],
+    "jitter-check": ["comet-jitter1", "voyager-jitter1.5", "aura-walk0.5", "eros-jitter0.75"],
 }
 
 
@@ -90,6 +91,8 @@ def test_groups_list_the_expected_sequences_in_order():
     assert nav_suite.sequence_names(jittered=True) == EXPECTED["jitter-holdout"]
     assert list(nav_suite.manoeuvre()) == EXPECTED["manoeuvre"]
     assert nav_suite.sequence_names(manoeuvred=True) == EXPECTED["manoeuvre"]
+    assert list(nav_suite.jitter_check()) == EXPECTED["jitter-check"]
+    assert nav_suite.sequence_names(named="jitter-check") == EXPECTED["jitter-check"]
 
 
 @pytest.mark.parametrize(
@@ -100,6 +103,8 @@ def test_groups_list_the_expected_sequences_in_order():
         (["--stress"], "stress"),
         (["--jitter-holdout"], "jitter-holdout"),
         (["--manoeuvre"], "manoeuvre"),
+        (["--group", "jitter-check"], "jitter-check"),
+        (["--group", "holdout"], "holdout"),
     ],
 )
 def test_the_benchmarks_group_flags_select_that_group(flags, group):

@@ -116,7 +116,15 @@ EVIDENCE = (
 ``run_method(per_step=True)`` returns under ``["steps"]["evidence"]`` for the flag studies, with
 the registration's ``fitness``."""
 
-GROUPS = ("suite", "holdout", "stress", "tumbling-holdout", "jitter-holdout", "manoeuvre")
+GROUPS = (
+    "suite",
+    "holdout",
+    "stress",
+    "tumbling-holdout",
+    "jitter-holdout",
+    "manoeuvre",
+    "jitter-check",
+)
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
 
 JITTER_DEG = (0.25, 0.5, 1.0, 2.0)
@@ -265,6 +273,12 @@ def manoeuvre() -> dict[str, dict[str, Any]]:
     return group("manoeuvre")
 
 
+def jitter_check() -> dict[str, dict[str, Any]]:
+    """Attitude jitter made after session 30 chose the screened extra starts, to check that
+    choice once (``configs/nav-jitter-check.yaml``)."""
+    return group("jitter-check")
+
+
 def paper(max_frames: int | None = None) -> dict[str, dict[str, Any]]:
     """Paper 1's presets of the suite's grid, by label, each its first ``max_frames`` frames
     (default: the grid's): with paper 1's data generation (one model cloud) and with fresh
@@ -291,13 +305,16 @@ def sequence_names(
     stressed: bool = False,
     jittered: bool = False,
     manoeuvred: bool = False,
+    named: str = "",
 ) -> list[str]:
     """The suite's sequences with the paper presets, or the held-out ones, or the stress group
     (:func:`stress`), or the jitter hold-out (:func:`jitter_holdout`), or the manoeuvres
-    (:func:`manoeuvre`); ``only``: keep the names containing one of its comma-separated
-    substrings."""
+    (:func:`manoeuvre`), or the group ``named`` (one of :data:`GROUPS`, before the others);
+    ``only``: keep the names containing one of its comma-separated substrings."""
     pool = (
-        manoeuvre()
+        group(named)
+        if named
+        else manoeuvre()
         if manoeuvred
         else jitter_holdout()
         if jittered
@@ -337,14 +354,22 @@ def add_sequence_arguments(p: argparse.ArgumentParser) -> None:
         "were frozen",
     )
     p.add_argument(
+        "--group",
+        default="",
+        help=f"any group by name, instead ({', '.join(GROUPS)}; 'suite' without paper 1's presets)",
+    )
+    p.add_argument(
         "-O", dest="options", action="append", default=[], help="relnav option key=value"
     )
 
 
 def selected_names(args: argparse.Namespace) -> list[str]:
     """The sequences that the arguments of :func:`add_sequence_arguments` select (the suite by
-    default; ``--holdout``, ``--stress``, ``--jitter-holdout`` or ``--manoeuvre``; ``--only``)."""
-    return sequence_names(args.holdout, args.only, args.stress, args.jitter_holdout, args.manoeuvre)
+    default; ``--holdout``, ``--stress``, ``--jitter-holdout``, ``--manoeuvre`` or ``--group``;
+    ``--only``)."""
+    return sequence_names(
+        args.holdout, args.only, args.stress, args.jitter_holdout, args.manoeuvre, args.group
+    )
 
 
 def simulate_suite(out: Path, names: list[str]) -> dict[str, Path]:
