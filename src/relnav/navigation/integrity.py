@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
-from relnav.geometry.eigen import block, sym_eigvals
+from relnav.geometry.eigen import block, matmul_t, sym_eigvals
 from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
@@ -63,14 +63,8 @@ def _draws_that_can_exceed(
     rounding) cannot, nor can any shorter one."""
     lam = np.empty(2)
     for blk in range(2):
-        G = np.empty((3, 3))
-        for i in range(3):
-            for j in range(3):
-                s = 0.0
-                for k in range(6):
-                    s += B[3 * blk + i, k] * B[3 * blk + j, k]
-                G[i, j] = s
-        lam[blk] = max(sym_eigvals(G)[2], 0.0) * (1.0 + 1e-9)
+        Bb = block(B, 3 * blk, 3 * blk + 3, 0, 6)
+        lam[blk] = max(sym_eigvals(matmul_t(Bb, Bb))[2], 0.0) * (1.0 + 1e-9)
     thr = np.inf  # draws with |z|² > thr may exceed a limit
     if lam[0] > 0.0:
         thr = min(thr, limit_t2 / lam[0])

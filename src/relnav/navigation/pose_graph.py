@@ -66,7 +66,7 @@ from relnav.geometry.lie import exp_se3, log_se3
 from relnav.geometry.pose_graph_solver import PoseGraph, PoseGraphResult
 from relnav.geometry.se3 import adjoint, invert
 from relnav.navigation.gicp import degeneracy, solve_scan_to_map, variance_factor
-from relnav.navigation.solver import median
+from relnav.navigation.solver import median_range
 from relnav.navigation.voxel_map import VoxelMap
 
 __all__ = [
@@ -599,7 +599,7 @@ def register_submap(
     P = np.ascontiguousarray(points, dtype=np.float64)
     v = target.voxel_size
     C = 0.5 * (prior_covariance + prior_covariance.T)
-    rng = median(np.linalg.norm(P, axis=1)) if len(P) else 1.0
+    rng = median_range(P) if len(P) else 1.0
     s = np.sqrt(np.maximum(np.diag(C), 0.0))
     gate = float(
         max(3.0 * (float(np.linalg.norm(s[:3])) + float(np.linalg.norm(s[3:])) * rng), 2.0 * v)

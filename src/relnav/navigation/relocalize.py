@@ -71,7 +71,7 @@ from relnav.geometry.se3 import kabsch
 from relnav.matching.correspondences import Correspondences
 from relnav.matching.gcc import consistency_bitset, geometric_consistency_grouping
 from relnav.matching.nn import match_descriptors
-from relnav.navigation.solver import median, rms_radius
+from relnav.navigation.solver import median_range, rms_radius
 from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
@@ -587,7 +587,7 @@ class Relocalizer:
         )
         if not cands:
             return None, "no consistent set of descriptor matches"
-        rng = median(np.linalg.norm(P, axis=1))
+        rng = median_range(P)
         radius = max(rms_radius(P), s0)
         gate = max(c.gate * s0, 2.0 * solver.map.voxel_size)
         pred = solver.solve(P, T_pred, solver.weak_prior(T_pred), gate, rng, radius, primary=False)

@@ -36,7 +36,7 @@ from relnav.navigation.voxel_map import VoxelMap
 from relnav.odometry.step_check import step_difference
 from relnav.registration.result import RegistrationResult
 
-__all__ = ["MapSolver", "median", "point_spacing", "rms_radius"]
+__all__ = ["MapSolver", "median", "median_range", "point_spacing", "rms_radius"]
 
 
 def median(x: np.ndarray) -> float:
@@ -50,6 +50,11 @@ def median(x: np.ndarray) -> float:
         return float(np.partition(x, k)[k])
     part = np.partition(x, (k - 1, k))
     return float((part[k - 1] + part[k]) / 2.0)
+
+
+def median_range(P: np.ndarray) -> float:
+    """The median range ``|p|`` of the points ``P`` (N, 3), m (NaN for no point)."""
+    return median(np.linalg.norm(P, axis=1))
 
 
 @njit(cache=True)

@@ -25,7 +25,7 @@ from relnav.geometry.lie import log_se3
 from relnav.geometry.rotations import angle_between_rotations
 from relnav.geometry.se3 import invert
 from relnav.navigation.options import in_map
-from relnav.navigation.solver import median
+from relnav.navigation.solver import median_range
 from relnav.navigation.startup.anchor import reanchor
 from relnav.navigation.startup.multiview import WindowFrame, refine_window
 from relnav.navigation.voxel_map import even_subset
@@ -143,7 +143,7 @@ class StartupWindow:
             assert P is not None
             f.P = P
             f.Pm = even_subset(P, c.map.max_map_points)
-            f.rng = max(median(np.linalg.norm(P, axis=1)), 1.0)
+            f.rng = max(median_range(P), 1.0)
         self.frames.append(f)
         if age not in self.due:
             return None
