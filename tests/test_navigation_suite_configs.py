@@ -77,6 +77,7 @@ EXPECTED = {
         "envisat-vbar-burn0.1",
     ],
     "jitter-check": ["comet-jitter1", "voyager-jitter1.5", "aura-walk0.5", "eros-jitter0.75"],
+    "jitter-learning": ["iridium-jitter1.5", "asteroid-jitter1", "comet-walk1", "eros-jitter1.5"],
 }
 
 
@@ -104,6 +105,7 @@ def test_groups_list_the_expected_sequences_in_order():
         (["--jitter-holdout"], "jitter-holdout"),
         (["--manoeuvre"], "manoeuvre"),
         (["--group", "jitter-check"], "jitter-check"),
+        (["--group", "jitter-learning"], "jitter-learning"),
         (["--group", "holdout"], "holdout"),
     ],
 )

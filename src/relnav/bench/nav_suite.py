@@ -124,6 +124,7 @@ GROUPS = (
     "jitter-holdout",
     "manoeuvre",
     "jitter-check",
+    "jitter-learning",
 )
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
 

@@ -249,7 +249,9 @@ class Navigator:
             self.motion.start_smoothing(self.config.prior.smooth_lag)
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
-        learn = self._settled() and self.attitude is None  # jitter: unless it is measured
+        # the jitter is learned from the map's jitter_after_frames-th frame, unless it is measured
+        learning = self.n_frames - self._f0 >= self.config.prior.jitter_after_frames
+        learn = learning and self.attitude is None
         self.motion.jitter_rate = self.config.prior.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
         aided = None
@@ -435,8 +437,8 @@ class Navigator:
 
     def _settled(self) -> bool:
         """Whether the motion model has seen ``integrity.flag_after_frames`` frames of the map:
-        before, its corrections are it learning the velocity (no jitter learned, no disagreement
-        flag)."""
+        before, its corrections are it learning the velocity (no disagreement flag; the jitter
+        is learned from ``prior.jitter_after_frames``)."""
         return self.n_frames - self._f0 >= self.config.integrity.flag_after_frames
 
     def skip_frame(self, reason: str) -> OdometryStep:

@@ -231,6 +231,12 @@ class PriorOptions(_Section):
         le=1,
         description="Learning rate of the attitude jitter from the rotation corrections (0: off).",
     )
+    jitter_after_frames: int = Field(
+        3,
+        ge=0,
+        description="Frames of the map before the jitter is learned (10: before session 31, "
+        "with the flags).",
+    )
     jitter_max_deg: float = Field(
         5.0, ge=0, le=90, description="Largest learned attitude jitter 1σ per axis, deg."
     )
@@ -363,7 +369,7 @@ class IntegrityOptions(_Section):
     flag_after_frames: int = Field(
         10,
         ge=0,
-        description="Frames of the map before the disagreement flags (and jitter learning) start.",
+        description="Frames of the map before the disagreement flags start.",
     )
     stability_check: bool = Field(
         False,
