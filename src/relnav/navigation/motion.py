@@ -204,7 +204,10 @@ class ConstantVelocityFilter:
         (``scan_rr``, rad² per axis: a registration's information under-states its error, so
         only corrections far beyond it are taken for jitter), at most ``jitter_max``; it is
         added to the predicted pose's rotation block only, so the velocity does not absorb
-        it. Off at ``jitter_rate = 0``.
+        it. Off at ``jitter_rate = 0``; the navigator turns it on from the map's
+        ``prior.jitter_after_frames``-th frame (**[interpretation]**, 3 since session 31, 10
+        before: the first corrections are also the velocity being learned, which a symmetric
+        target's first frames can take for jitter; docs/navigator.md, session 31).
         """
         if self.jitter_rate <= 0:
             return
