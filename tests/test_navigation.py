@@ -466,6 +466,20 @@ def test_degeneracy_and_variance_factor_of_a_registration(rng):
     assert variance_factor(float("nan")) == variance_factor(float("inf")) == 1.0
 
 
+def test_robust_cost_saturates_at_the_kernel_and_counts_unpaired_points_there():
+    """Geman–McClure on squared Mahalanobis distances: 0 at a perfect pair, ``c²/2`` at
+    ``d = c``, towards ``c²`` far out, and ``c²`` for a point without a pair."""
+    from relnav.navigation.gicp import robust_cost
+
+    c = 3.0
+    assert robust_cost(np.array([0.0]), c) == 0.0
+    assert robust_cost(np.array([9.0]), c) == pytest.approx(4.5)
+    assert robust_cost(np.array([1e12]), c) == pytest.approx(9.0)
+    assert robust_cost(np.array([-1.0, -1.0]), c) == pytest.approx(18.0)
+    assert robust_cost(np.array([0.0, 1.0, 9.0, -1.0]), c) == pytest.approx(0.9 + 4.5 + 9.0)
+    assert robust_cost(np.array([]), c) == 0.0
+
+
 def test_drift_covariance_maps_the_step_to_the_observation(rng):
     """A step error is a body twist of ``T_target_sensor``; the observation is the target's
     position in the sensor frame and its attitude in target axes."""

@@ -78,6 +78,7 @@ EXPECTED = {
     ],
     "jitter-check": ["comet-jitter1", "voyager-jitter1.5", "aura-walk0.5", "eros-jitter0.75"],
     "jitter-learning": ["iridium-jitter1.5", "asteroid-jitter1", "comet-walk1", "eros-jitter1.5"],
+    "jitter-choice": ["orion-jitter1", "probe-jitter1.5", "iridium-walk1", "aura-jitter1.5"],
 }
 
 
@@ -106,6 +107,7 @@ def test_groups_list_the_expected_sequences_in_order():
         (["--manoeuvre"], "manoeuvre"),
         (["--group", "jitter-check"], "jitter-check"),
         (["--group", "jitter-learning"], "jitter-learning"),
+        (["--group", "jitter-choice"], "jitter-choice"),
         (["--group", "holdout"], "holdout"),
     ],
 )

@@ -125,6 +125,7 @@ GROUPS = (
     "manoeuvre",
     "jitter-check",
     "jitter-learning",
+    "jitter-choice",
 )
 """The sequence groups, one grid ``configs/nav-<group>.yaml`` each."""
 

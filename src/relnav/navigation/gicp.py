@@ -494,6 +494,16 @@ class ScanToMapFit:
         return math.sqrt(self.swd / self.sw) if self.sw > 0 else math.inf
 
 
+def robust_cost(d2: np.ndarray, c: float) -> float:
+    """The registration's robust cost at its final pairs: ``Σ c² d²/(c² + d²)`` (Geman–McClure
+    on the squared Mahalanobis distances ``d2``, ``(N,)``), a point without a pair (``d2 < 0``)
+    counted at the kernel's ceiling ``c²``."""
+    c2 = c * c
+    has = d2 >= 0
+    d = d2[has]
+    return float(np.sum(c2 * d / (c2 + d)) + c2 * np.count_nonzero(~has))
+
+
 def variance_factor(rms: float) -> float:
     """**[interpretation]** The factor dividing a registration's information: residuals larger
     than the map's noise model (resampled surfaces, map blur) scale it down, ``σ̂² = max(1,

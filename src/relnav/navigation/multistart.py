@@ -5,10 +5,17 @@
 other minima within the jitter's reach of the prediction, and the solver, started at the
 prediction, stops in the nearest. The navigator registers the scan again from the prediction
 turned by ``±k σ_j`` about each sensor axis (``k = 1 … jitter_starts``, ``σ_j`` the learned
-jitter's 1σ per axis) and keeps the answer the scan fits best (lowest robust RMS). Measured on
+jitter's 1σ per axis) and keeps the answer of lowest objective (``prior.jitter_choice``: the
+robust cost at its pairs plus its χ² against the prior, what the solver minimises; lowest robust
+RMS, the scan's fit alone, before session 31). Measured on
 the stress group (causal, ``nav_suite.py --stress``): envisat-jitter1 wrong steps 50 → 10,
 envisat-jitter2 97 → 55, envisat-jitter0.5 5 → 0; ``k = 1.5`` alone or ``2.5`` alone did worse
-(15 and 28 wrong on envisat-jitter1).
+(15 and 28 wrong on envisat-jitter1; measured with the lowest robust RMS kept).
+
+**[interpretation]** The lowest objective rather than the lowest RMS (session 31): along a
+nearly flat direction of the scan's cost (a near-symmetric target) the answers' RMS differ by
+little, and the RMS alone let the track walk along it from frame to frame; the objective lets
+the prior decide there (docs/navigator.md, session 31).
 
 **[interpretation]** The starts are screened by default (``prior.jitter_screen``,
 :meth:`relnav.navigation.solver.MapSolver.solve_starts`): each is registered on every third scan

@@ -671,8 +671,9 @@ class Navigator:
             starts = rotated_starts(T_pred, sj, c.prior.jitter_starts)  # other minima
             answers = solver.solve_starts(P, T_pred, Lam, gate, rng, radius, Lam_fit, starts)
             fit = answers[0]
+            key = "rms" if c.prior.jitter_choice == "rms" else "objective"
             for alt in answers[1:]:
-                fit = alt if alt["usable"] and alt["rms"] < fit["rms"] else fit
+                fit = alt if alt["usable"] and alt[key] < fit[key] else fit
             if len(answers) > 1 and c.integrity.ambiguity_rms > 0:
                 info.update(ambiguity(fit, answers, c))
         else:

@@ -253,6 +253,12 @@ class PriorOptions(_Section):
     jitter_start_min_deg: float = Field(
         0.3, ge=0, le=90, description="Learned jitter 1σ from which the extra starts run, deg."
     )
+    jitter_choice: Literal["objective", "rms"] = Field(
+        "objective",
+        description="Keep the answer (the prediction's or an extra start's) of lowest objective, "
+        "the robust cost plus χ² against the motion model's prior, or of lowest robust RMS "
+        "(before session 31).",
+    )
     jitter_screen: int = Field(
         3,
         ge=1,

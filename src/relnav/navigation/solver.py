@@ -27,6 +27,7 @@ from relnav.navigation.gicp import (
     left_information,
     motion_chi2,
     normal_information,
+    robust_cost,
     solve_scan_to_map,
     variance_factor,
 )
@@ -378,7 +379,9 @@ class MapSolver:
         voxel_map: VoxelMap | None,
     ) -> dict[str, Any]:
         """:meth:`solve`'s answer from its registration ``fit``: the repeated-points refinement
-        (onto the navigator's map only) and the quality figures."""
+        (onto the navigator's map only) and the quality figures (``"objective"``: the robust cost
+        at the final pairs, :func:`~relnav.navigation.gicp.robust_cost`, plus ``"chi2"``, the
+        answer's χ² against the prior ``Lam``)."""
         c = self.config
         target = self.map if voxel_map is None else voxel_map
         assert target is not None
@@ -413,6 +416,7 @@ class MapSolver:
         has = fit.d2 >= 0
         inl = has & (fit.d2 < 9.0)
         rms = fit.rms if fit.sw > 0 else float("nan")
+        chi2 = motion_chi2(fit.T, T_pred, Lam)
         return {
             "T": fit.T,
             "H": H_cov,
@@ -421,7 +425,8 @@ class MapSolver:
             "overlap": float(has.sum()) / n,
             "fitness": float(inl.sum()) / n,
             "n_inliers": int(inl.sum()),
-            "chi2": motion_chi2(fit.T, T_pred, Lam),
+            "chi2": chi2,
+            "objective": robust_cost(fit.d2, float(c.solver.kernel)) + chi2,
             "cond": degeneracy(H_cov, radius),
             "rms": rms,
             "var_factor": variance_factor(rms),
