@@ -289,6 +289,22 @@ def test_rotated_starts_turn_the_prediction_about_each_sensor_axis():
     assert all(np.allclose(S[:3, 3], T[:3, 3]) for S in starts)  # about the sensor's origin
 
 
+def test_kept_answer_is_the_lowest_objective_or_the_lowest_rms():
+    """Of the prediction's answer and the extra starts', the lowest objective (robust cost plus
+    the prior's χ²) is kept by default, the lowest robust RMS with ``choice="rms"``; an unusable
+    answer never, and the prediction's on a tie."""
+    from relnav.navigation.multistart import kept_answer
+
+    first = {"usable": True, "rms": 1.0, "objective": 10.0}
+    tight_far = {"usable": True, "rms": 0.9, "objective": 20.0}  # fits better, far from the prior
+    lost = {"usable": False, "rms": 0.1, "objective": 1.0}
+    assert kept_answer([first, tight_far, lost]) is first
+    assert kept_answer([first, tight_far, lost], "rms") is tight_far
+    better = {"usable": True, "rms": 1.1, "objective": 9.0}
+    assert kept_answer([first, tight_far, better]) is better
+    assert kept_answer([first, dict(first)]) is first
+
+
 @pytest.fixture(scope="module")
 def jittered_longer(tmp_path_factory):
     """The flash orbit of :func:`jittered` over 40 frames with 1.5° white attitude jitter."""

@@ -26,11 +26,13 @@ a jittered frame's time with wrong steps fewer or within the perturbations' spre
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from relnav.geometry.lie import exp_se3
 
-__all__ = ["rotated_starts"]
+__all__ = ["kept_answer", "rotated_starts"]
 
 
 def rotated_starts(T_pred: np.ndarray, sigma_rad: float, multiples: int) -> list[np.ndarray]:
@@ -44,3 +46,15 @@ def rotated_starts(T_pred: np.ndarray, sigma_rad: float, multiples: int) -> list
                 w[3 + axis] = sign * k * float(sigma_rad)
                 starts.append(T_pred @ exp_se3(w))
     return starts
+
+
+def kept_answer(answers: list[dict[str, Any]], choice: str = "objective") -> dict[str, Any]:
+    """The answer kept among the prediction's (first, kept unless another beats it) and the
+    extra starts': the usable one of lowest ``"objective"`` (robust cost plus χ² against the
+    prior) or, with ``choice="rms"``, of lowest robust RMS; ties keep the earlier answer."""
+    key = "rms" if choice == "rms" else "objective"
+    fit = answers[0]
+    for alt in answers[1:]:
+        if alt["usable"] and alt[key] < fit[key]:
+            fit = alt
+    return fit

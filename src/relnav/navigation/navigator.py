@@ -56,7 +56,7 @@ from relnav.navigation.integrity import (
     step_sigmas,
 )
 from relnav.navigation.motion import ConstantVelocityFilter
-from relnav.navigation.multistart import rotated_starts
+from relnav.navigation.multistart import kept_answer, rotated_starts
 from relnav.navigation.options import (
     NavigatorConfig,
     in_map,
@@ -670,10 +670,7 @@ class Navigator:
         if c.prior.jitter_starts > 0 and jittering:
             starts = rotated_starts(T_pred, sj, c.prior.jitter_starts)  # other minima
             answers = solver.solve_starts(P, T_pred, Lam, gate, rng, radius, Lam_fit, starts)
-            fit = answers[0]
-            key = "rms" if c.prior.jitter_choice == "rms" else "objective"
-            for alt in answers[1:]:
-                fit = alt if alt["usable"] and alt[key] < fit[key] else fit
+            fit = kept_answer(answers, c.prior.jitter_choice)
             if len(answers) > 1 and c.integrity.ambiguity_rms > 0:
                 info.update(ambiguity(fit, answers, c))
         else:
