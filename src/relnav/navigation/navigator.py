@@ -250,8 +250,7 @@ class Navigator:
         if np.isfinite(t - self.motion.t) and t > self.motion.t:
             self._last_dt = t - self.motion.t
         # the jitter is learned from the map's jitter_after_frames-th frame, unless it is measured
-        learning = self.n_frames - self._f0 >= self.config.prior.jitter_after_frames
-        learn = learning and self.attitude is None
+        learn = self._settled(self.config.prior.jitter_after_frames) and self.attitude is None
         self.motion.jitter_rate = self.config.prior.jitter_rate if learn else 0.0
         T_pred, P_pp = self.motion.predict(t)
         aided = None
@@ -435,11 +434,13 @@ class Navigator:
         if why:
             result.status, result.message = "flagged", why
 
-    def _settled(self) -> bool:
-        """Whether the motion model has seen ``integrity.flag_after_frames`` frames of the map:
-        before, its corrections are it learning the velocity (no disagreement flag; the jitter
-        is learned from ``prior.jitter_after_frames``)."""
-        return self.n_frames - self._f0 >= self.config.integrity.flag_after_frames
+    def _settled(self, frames: int | None = None) -> bool:
+        """Whether the motion model has seen ``frames`` frames of the map (default
+        ``integrity.flag_after_frames``): before, its corrections are it learning the velocity
+        (no disagreement flag; the jitter is learned from ``prior.jitter_after_frames``)."""
+        if frames is None:
+            frames = self.config.integrity.flag_after_frames
+        return self.n_frames - self._f0 >= frames
 
     def skip_frame(self, reason: str) -> OdometryStep:
         """Flag a frame whose scan could not be read: status ``failed``, pose predicted by the

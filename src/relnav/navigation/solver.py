@@ -344,7 +344,9 @@ class MapSolver:
             return self.register_on_map(Q, info, T0, T_pred, Lam_fit, gate, rng)
 
         def figures(fit: ScanToMapFit, primary: bool) -> dict[str, Any]:
-            return self._figures(P, fit, T_pred, Lam, Lam_fit, gate, rng, radius, primary, None)
+            return self._figures(
+                P, fit, T_pred, Lam, Lam_fit, gate, rng, radius, primary, None, objective=True
+            )
 
         solve_other = register_screened if screen else register
         pool = thread_pool(self.config.solver.threads)
@@ -377,11 +379,14 @@ class MapSolver:
         radius: float,
         primary: bool,
         voxel_map: VoxelMap | None,
+        objective: bool = False,
     ) -> dict[str, Any]:
         """:meth:`solve`'s answer from its registration ``fit``: the repeated-points refinement
-        (onto the navigator's map only) and the quality figures (``"objective"``: the robust cost
-        at the final pairs, :func:`~relnav.navigation.gicp.robust_cost`, plus ``"chi2"``, the
-        answer's χ² against the prior ``Lam``)."""
+        (onto the navigator's map only) and the quality figures; with ``objective`` (the answers
+        :meth:`solve_starts` returns, compared by :func:`~relnav.navigation.multistart.kept_answer`)
+        also ``"objective"``: the robust cost at the final pairs,
+        :func:`~relnav.navigation.gicp.robust_cost`, plus ``"chi2"``, the answer's χ² against the
+        prior ``Lam`` (NaN otherwise)."""
         c = self.config
         target = self.map if voxel_map is None else voxel_map
         assert target is not None
@@ -426,7 +431,9 @@ class MapSolver:
             "fitness": float(inl.sum()) / n,
             "n_inliers": int(inl.sum()),
             "chi2": chi2,
-            "objective": robust_cost(fit.d2, float(c.solver.kernel)) + chi2,
+            "objective": (
+                robust_cost(fit.d2, float(c.solver.kernel)) + chi2 if objective else math.nan
+            ),
             "cond": degeneracy(H_cov, radius),
             "rms": rms,
             "var_factor": variance_factor(rms),
