@@ -394,6 +394,7 @@ def solve_scan_to_map(
     c0: float = 100.0,
     decay: float = 0.6,
     information: np.ndarray | None = None,
+    from_means: bool = False,
 ) -> ScanToMapFit:
     """Register the scan ``P`` (sensor frame, ``(N, 3)``) onto the map ``target`` from ``T0``.
 
@@ -425,6 +426,9 @@ def solve_scan_to_map(
     information : (K, 3, 3) float64, optional
         Per-point information used instead of the map's (the navigator's point-to-point
         refinement on repeated points).
+    from_means : bool
+        Measure the residuals from the voxel means, not from the map's
+        :attr:`~relnav.navigation.voxel_map.VoxelMap.patch_points` (always so with curved patches).
     """
     surface = target.surface
     if surface is None:
@@ -434,10 +438,11 @@ def solve_scan_to_map(
         Qd = np.ascontiguousarray(surface[1], dtype=np.float64)
         use_quad = True
     Om = target.information if information is None else information
+    M = target.means if from_means or surface is not None else target.patch_points
     T, H, n_pairs, iters, sw, swd, d2, idx = _solve_loop(
         np.ascontiguousarray(P, dtype=np.float64),
         target.search_trees,
-        target.means,
+        M,
         Om,
         np.ascontiguousarray(T0, dtype=np.float64),
         np.ascontiguousarray(T_pred, dtype=np.float64),

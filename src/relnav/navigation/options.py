@@ -115,6 +115,11 @@ class MapOptions(_Section):
         description="A quadric patch whose neighbours reach farther than this (× s₀) stays a "
         "plane.",
     )
+    patch_point: Literal["mean", "plane"] = Field(
+        "mean",
+        description="A plane patch's residuals from the voxel's mean, or from the plane through "
+        "its neighbours' centroid.",
+    )
     max_points: int = Field(
         4000,
         ge=6,

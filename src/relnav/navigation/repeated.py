@@ -61,7 +61,7 @@ from relnav.navigation.voxel_map import VoxelMap, even_subset
 Register = Callable[..., ScanToMapFit]
 """The solver's registration onto the map,
 :meth:`relnav.navigation.solver.MapSolver.register_on_map`: ``(P, information, T0, T_pred, Lam,
-gate, rng) → ScanToMapFit``."""
+gate, rng, from_means=...) → ScanToMapFit``."""
 
 __all__ = ["PATIENCE", "RAY_FRACTION", "RETEST", "RepeatedPoints"]
 
@@ -256,7 +256,9 @@ class RepeatedPoints:
             Fraction of the scan on the previous scan's rays (0 without a previous scan).
         """
         sig = self.options.repeat_refine * spacing0
-        fit = register(P, self._isotropic(len(voxel_map), sig), T0, T_pred, Lam, gate, rng)
+        iso = self._isotropic(len(voxel_map), sig)
+        # point to point onto the same surface samples: from the voxel means
+        fit = register(P, iso, T0, T_pred, Lam, gate, rng, from_means=True)
         return fit, self.evidence(P, fit.T, sig, spacing0)
 
     def _isotropic(self, m: int, sig: float) -> np.ndarray:

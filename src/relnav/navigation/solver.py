@@ -248,13 +248,15 @@ class MapSolver:
         rng: float,
         kernel_scale: float = 1.0,
         voxel_map: VoxelMap | None = None,
+        from_means: bool = False,
     ) -> ScanToMapFit:
         """Robust GICP of the scan ``P`` (sensor frame, m) onto the map's points with the
         per-point information ``info`` ``(M, 3, 3)``, from ``T0``, under the prior ``(T_pred,
         Lam)`` (left twist information, target frame); ``gate`` the pair gate (m), ``rng`` the
         scan's median range (m, for the rotation tolerance); ``voxel_map`` another map than
-        the navigator's (its information is then ``info``). The solver's options come from the
-        configuration (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
+        the navigator's (its information is then ``info``); ``from_means``: residuals from the
+        voxel means, not the map's patch points. The solver's options come from the configuration
+        (:func:`~relnav.navigation.gicp.solve_scan_to_map`)."""
         c = self.config
         target = self.map if voxel_map is None else voxel_map
         assert target is not None
@@ -273,6 +275,7 @@ class MapSolver:
             c0=float(c.solver.kernel_start) * kernel_scale,
             decay=float(c.solver.kernel_decay),
             information=info,
+            from_means=from_means,
         )
 
     def solve(
@@ -457,6 +460,7 @@ class MapSolver:
             "surface": c.map.surface,
             "curvature_sigma": c.map.curvature_sigma,
             "quadric_reach": c.map.quadric_reach * s0,
+            "patch_point": c.map.patch_point,
         }
 
     def new_map(self) -> VoxelMap:

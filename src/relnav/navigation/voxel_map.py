@@ -43,12 +43,14 @@ __all__ = ["VoxelMap", "even_subset", "plane_information", "quadric_surface"]
 @njit(cache=True)
 def _plane_info_kernel(
     M: np.ndarray, nb: np.ndarray, inplane_var: float, noise_var: float, gain: float
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Information and normal of each row's neighbourhood ``M[nb[i]]`` (-1 entries skipped);
-    ``gain``: the non-planarity gain ``γ`` of :func:`plane_information`."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    """Information, normal and centroid of each row's neighbourhood ``M[nb[i]]`` (-1 entries
+    skipped; fewer than 3: the centroid is NaN); ``gain``: the non-planarity gain ``γ`` of
+    :func:`plane_information`."""
     q = nb.shape[0]
     info = np.zeros((q, 3, 3))
     nrm = np.zeros((q, 3))
+    cen = np.full((q, 3), np.nan)
     C = np.zeros((3, 3))
     for i in range(q):
         m = 0
@@ -69,6 +71,7 @@ def _plane_info_kernel(
         c0 /= m
         c1 /= m
         c2 /= m
+        cen[i, 0], cen[i, 1], cen[i, 2] = c0, c1, c2
         for a in range(3):
             for b in range(3):
                 C[a, b] = 0.0
@@ -104,7 +107,7 @@ def _plane_info_kernel(
             for b in range(3):
                 nn = nv[a] * nv[b]
                 info[i, a, b] = nn / l0 + ((1.0 if a == b else 0.0) - nn) / inplane_var
-    return info, nrm
+    return info, nrm, cen
 
 
 @njit(cache=True)
@@ -341,6 +344,19 @@ def plane_information(
     normals : (Q, 3) float64
         Unit normals (sign arbitrary).
     """
+    info, normals, _ = _plane_patches(points, neighbors, inplane_sigma, noise_floor, nonplanar_gain)
+    return info, normals
+
+
+def _plane_patches(
+    points: np.ndarray,
+    neighbors: np.ndarray,
+    inplane_sigma: float,
+    noise_floor: float,
+    nonplanar_gain: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`plane_information`'s ``(info, normals)`` and the neighbourhoods' centroids
+    ``(Q, 3)`` (NaN with fewer than 3 neighbours)."""
     return _plane_info_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(neighbors, dtype=np.int64),
@@ -494,6 +510,10 @@ class VoxelMap:
         Prior 1σ of a quadric patch's curvatures, 1/m.
     quadric_reach : float
         A patch whose neighbours reach farther than this (m) stays a plane.
+    patch_point : {"mean", "plane"}
+        Where a plane patch's residuals are measured from (:attr:`patch_points`): the voxel's mean,
+        or that mean moved along the patch's normal onto the plane through its neighbours'
+        centroid.
     """
 
     def __init__(
@@ -510,6 +530,7 @@ class VoxelMap:
         surface: str = "plane",
         curvature_sigma: float = 0.3,
         quadric_reach: float = np.inf,
+        patch_point: str = "mean",
     ) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
@@ -529,6 +550,9 @@ class VoxelMap:
             raise ValueError(f"curvature_sigma must be a number > 0, got {curvature_sigma}")
         if not quadric_reach >= 0:
             raise ValueError(f"quadric_reach must be >= 0 metres, got {quadric_reach}")
+        if patch_point not in ("mean", "plane"):
+            raise ValueError(f"patch_point must be 'mean' or 'plane', got {patch_point!r}")
+        self.patch_point = patch_point
         self.surface_model = surface
         self.curvature_sigma = float(curvature_sigma)
         self.quadric_reach = float(quadric_reach)
@@ -543,12 +567,14 @@ class VoxelMap:
         self._info_all = np.zeros((cap, 3, 3))
         self._normal_all = np.zeros((cap, 3))
         self._quad_all = np.zeros((cap, 11))
+        self._offset_all = np.zeros(cap)
         self.n = 0
         self._touched: set[int] = set()
         self._n_main = 0  # points [0, n_main) are in the main trees
         self._main_nb: tuple[np.ndarray, ...] | None = None
         self._recent_nb: tuple[np.ndarray, ...] | None = None
         self._mean: np.ndarray | None = None
+        self._patch_pt: np.ndarray | None = None
         self._dirty = True
 
     def __len__(self) -> int:
@@ -601,6 +627,7 @@ class VoxelMap:
             self._info_all = np.resize(self._info_all, (cap, 3, 3))
             self._normal_all = np.resize(self._normal_all, (cap, 3))
             self._quad_all = np.resize(self._quad_all, (cap, 11))
+            self._offset_all = np.resize(self._offset_all, cap)
         i = np.arange(self.n, self.n + m, dtype=np.int64)
         self._w[i] = 0.0
         self._s1[i] = 0.0
@@ -610,7 +637,16 @@ class VoxelMap:
 
     def _evict(self) -> None:
         keep = np.sort(np.argsort(-self._seen[: self.n], kind="stable")[: self.max_voxels])
-        for name in ("_w", "_s1", "_seen", "_keys", "_info_all", "_normal_all", "_quad_all"):
+        for name in (
+            "_w",
+            "_s1",
+            "_seen",
+            "_keys",
+            "_info_all",
+            "_normal_all",
+            "_quad_all",
+            "_offset_all",
+        ):
             setattr(self, name, getattr(self, name)[keep].copy())
         self.n = len(keep)
         codes = _pack(self._keys[: self.n])
@@ -636,6 +672,21 @@ class VoxelMap:
         self._refresh()
         assert self._mean is not None
         return self._mean
+
+    @property
+    def patch_points(self) -> np.ndarray:
+        """``(M, 3)`` the points a plane patch's residuals are measured from, target frame, m:
+        the voxel means (``patch_point="mean"``) or, with ``"plane"``, each mean moved along its
+        patch's normal onto the plane through its ``k`` neighbours' centroid.
+
+        **[interpretation]** A voxel holds a few noisy observations, so its mean is off the
+        surface by about the sensor's noise; the patch's plane is fitted to ``k`` of them and is
+        off by about ``1/√k`` of it. Measuring from the plane keeps the patch's normal and its
+        in-plane position (the nearest-point search still uses the means).
+        """
+        self._refresh()
+        assert self._patch_pt is not None
+        return self._patch_pt
 
     @property
     def information(self) -> np.ndarray:
@@ -687,11 +738,13 @@ class VoxelMap:
         if len(touched):
             k = min(self.k_neighbors, n)
             nb = _map_knn(self._main_nb, self._recent_nb, mu[touched], k, start, n - start)
-            info, nrm = plane_information(
+            info, nrm, cen = _plane_patches(
                 mu, nb, self.inplane_sigma, self.noise_floor, self.nonplanar_gain
             )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
+            off = np.einsum("ij,ij->i", nrm, mu[touched] - cen)
+            self._offset_all[touched] = np.where(np.isfinite(off), off, 0.0)
             if self.surface_model == "quadric":
                 self._quad_all[touched] = quadric_surface(
                     mu,
@@ -704,6 +757,11 @@ class VoxelMap:
                 )
         self._touched = set()
         self._mean = mu
+        if self.patch_point == "plane":
+            off = self._offset_all[:n]
+            self._patch_pt = mu - self._normal_all[:n] * off[:, None]
+        else:
+            self._patch_pt = mu
         self._dirty = False
 
 
