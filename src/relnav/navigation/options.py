@@ -116,9 +116,15 @@ class MapOptions(_Section):
         "plane.",
     )
     patch_point: Literal["mean", "plane"] = Field(
-        "mean",
-        description="A plane patch's residuals from the voxel's mean, or from the plane through "
-        "its neighbours' centroid.",
+        "plane",
+        description="A plane patch's residuals from the plane through its neighbours' centroid "
+        "(within ``patch_point_reach``), or from the voxel's mean (before session 32).",
+    )
+    patch_point_reach: float = Field(
+        1.2,
+        ge=0,
+        description="A plane patch whose neighbours reach farther than this (× s₀) keeps its "
+        "mean as its point.",
     )
     max_points: int = Field(
         4000,

@@ -461,6 +461,7 @@ class MapSolver:
             "curvature_sigma": c.map.curvature_sigma,
             "quadric_reach": c.map.quadric_reach * s0,
             "patch_point": c.map.patch_point,
+            "patch_point_reach": c.map.patch_point_reach * s0,
         }
 
     def new_map(self) -> VoxelMap:

@@ -42,15 +42,24 @@ __all__ = ["VoxelMap", "even_subset", "plane_information", "quadric_surface"]
 
 @njit(cache=True)
 def _plane_info_kernel(
-    M: np.ndarray, nb: np.ndarray, inplane_var: float, noise_var: float, gain: float
+    M: np.ndarray,
+    nb: np.ndarray,
+    inplane_var: float,
+    noise_var: float,
+    gain: float,
+    centers: np.ndarray,
+    max_reach: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
-    """Information, normal and centroid of each row's neighbourhood ``M[nb[i]]`` (-1 entries
-    skipped; fewer than 3: the centroid is NaN); ``gain``: the non-planarity gain ``γ`` of
-    :func:`plane_information`."""
+    """Information and normal of each row's neighbourhood ``M[nb[i]]`` (-1 entries skipped);
+    ``gain``: the non-planarity gain ``γ`` of :func:`plane_information`. With ``centers``
+    ``(q, 3)`` (else ``(0, 3)``) also the signed distance of each centre from the plane through
+    its neighbours' centroid (0 with fewer than 3 neighbours or where one of them lies farther
+    than ``max_reach`` along that plane)."""
     q = nb.shape[0]
     info = np.zeros((q, 3, 3))
     nrm = np.zeros((q, 3))
-    cen = np.full((q, 3), np.nan)
+    off = np.zeros(q)
+    with_offsets = centers.shape[0] == q
     C = np.zeros((3, 3))
     for i in range(q):
         m = 0
@@ -71,7 +80,6 @@ def _plane_info_kernel(
         c0 /= m
         c1 /= m
         c2 /= m
-        cen[i, 0], cen[i, 1], cen[i, 2] = c0, c1, c2
         for a in range(3):
             for b in range(3):
                 C[a, b] = 0.0
@@ -107,7 +115,19 @@ def _plane_info_kernel(
             for b in range(3):
                 nn = nv[a] * nv[b]
                 info[i, a, b] = nn / l0 + ((1.0 if a == b else 0.0) - nn) / inplane_var
-    return info, nrm, cen
+        if with_offsets:
+            p0, p1, p2 = centers[i, 0], centers[i, 1], centers[i, 2]
+            reach2 = 0.0
+            for j in range(nb.shape[1]):
+                k = nb[i, j]
+                if k < 0:
+                    continue
+                d0, d1, d2 = M[k, 0] - p0, M[k, 1] - p1, M[k, 2] - p2
+                h = d0 * n0 + d1 * n1 + d2 * n2
+                reach2 = max(reach2, d0 * d0 + d1 * d1 + d2 * d2 - h * h)
+            if reach2 <= max_reach * max_reach:
+                off[i] = n0 * (p0 - c0) + n1 * (p1 - c1) + n2 * (p2 - c2)
+    return info, nrm, off
 
 
 @njit(cache=True)
@@ -354,15 +374,23 @@ def _plane_patches(
     inplane_sigma: float,
     noise_floor: float,
     nonplanar_gain: float = 0.0,
+    centers: np.ndarray | None = None,
+    max_reach: float = np.inf,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`plane_information`'s ``(info, normals)`` and the neighbourhoods' centroids
-    ``(Q, 3)`` (NaN with fewer than 3 neighbours)."""
+    """:func:`plane_information`'s ``(info, normals)`` and, for the patches' ``centers``
+    ``(Q, 3)``, their signed distances ``(Q,)`` (m, along the normal) from the plane through
+    their neighbours' centroid (0 with fewer than 3 neighbours or where the neighbourhood reaches
+    farther than ``max_reach`` (m) along that plane: a sparse map, a thin part; zeros without
+    ``centers``)."""
+    C = np.zeros((0, 3)) if centers is None else centers
     return _plane_info_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(neighbors, dtype=np.int64),
         float(inplane_sigma) ** 2,
         float(noise_floor) ** 2,
         float(nonplanar_gain),
+        np.ascontiguousarray(C, dtype=np.float64),
+        float(max_reach),
     )
 
 
@@ -513,7 +541,7 @@ class VoxelMap:
     patch_point : {"mean", "plane"}
         Where a plane patch's residuals are measured from (:attr:`patch_points`): the voxel's mean,
         or that mean moved along the patch's normal onto the plane through its neighbours'
-        centroid.
+        centroid (not where they reach farther than ``patch_point_reach``, m).
     """
 
     def __init__(
@@ -531,6 +559,7 @@ class VoxelMap:
         curvature_sigma: float = 0.3,
         quadric_reach: float = np.inf,
         patch_point: str = "mean",
+        patch_point_reach: float = np.inf,
     ) -> None:
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
@@ -553,6 +582,9 @@ class VoxelMap:
         if patch_point not in ("mean", "plane"):
             raise ValueError(f"patch_point must be 'mean' or 'plane', got {patch_point!r}")
         self.patch_point = patch_point
+        if not patch_point_reach >= 0:
+            raise ValueError(f"patch_point_reach must be >= 0 metres, got {patch_point_reach}")
+        self.patch_point_reach = float(patch_point_reach)
         self.surface_model = surface
         self.curvature_sigma = float(curvature_sigma)
         self.quadric_reach = float(quadric_reach)
@@ -681,8 +713,14 @@ class VoxelMap:
 
         **[interpretation]** A voxel holds a few noisy observations, so its mean is off the
         surface by about the sensor's noise; the patch's plane is fitted to ``k`` of them and is
-        off by about ``1/√k`` of it. Measuring from the plane keeps the patch's normal and its
-        in-plane position (the nearest-point search still uses the means).
+        off by about ``1/√k`` of it, but biased where the surface curves. The point moves along
+        the normal by the precision-weighted share of the distance ``d`` from the mean to the
+        plane, ``d / (1 + w)``: the mean of ``w`` observations has variance ``σ²/w``, the plane
+        is counted at ``σ²`` (its curvature bias taken as one observation's noise). A voxel seen
+        once moves half-way, one seen 20 times (a hold point's repeated rays) by 5 %. It keeps
+        its normal and its in-plane position (the nearest-point search still uses the means). A
+        neighbourhood that reaches farther than ``patch_point_reach`` along its plane keeps its
+        mean: on a sparse map the plane of ``k`` far neighbours cuts through a curved surface.
         """
         self._refresh()
         assert self._patch_pt is not None
@@ -738,13 +776,20 @@ class VoxelMap:
         if len(touched):
             k = min(self.k_neighbors, n)
             nb = _map_knn(self._main_nb, self._recent_nb, mu[touched], k, start, n - start)
-            info, nrm, cen = _plane_patches(
-                mu, nb, self.inplane_sigma, self.noise_floor, self.nonplanar_gain
+            plane = self.patch_point == "plane"
+            info, nrm, off = _plane_patches(
+                mu,
+                nb,
+                self.inplane_sigma,
+                self.noise_floor,
+                self.nonplanar_gain,
+                centers=mu[touched] if plane else None,
+                max_reach=self.patch_point_reach,
             )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
-            off = np.einsum("ij,ij->i", nrm, mu[touched] - cen)
-            self._offset_all[touched] = np.where(np.isfinite(off), off, 0.0)
+            # the shift onto the plane, weighed against the voxel's own observations
+            self._offset_all[touched] = off / (1.0 + np.maximum(self._w[touched], 1.0))
             if self.surface_model == "quadric":
                 self._quad_all[touched] = quadric_surface(
                     mu,
