@@ -540,7 +540,7 @@ class VoxelMap:
         A patch whose neighbours reach farther than this (m) stays a plane.
     patch_point : {"mean", "plane"}
         Where a plane patch's residuals are measured from (:attr:`patch_points`): the voxel's mean,
-        or that mean moved along the patch's normal onto the plane through its neighbours'
+        or that mean moved along the patch's normal toward the plane through its neighbours'
         centroid (not where they reach farther than ``patch_point_reach``, m).
     """
 
@@ -709,7 +709,7 @@ class VoxelMap:
     def patch_points(self) -> np.ndarray:
         """``(M, 3)`` the points a plane patch's residuals are measured from, target frame, m:
         the voxel means (``patch_point="mean"``) or, with ``"plane"``, each mean moved along its
-        patch's normal onto the plane through its ``k`` neighbours' centroid.
+        patch's normal toward the plane through its ``k`` neighbours' centroid.
 
         **[interpretation]** A voxel holds a few noisy observations, so its mean is off the
         surface by about the sensor's noise; the patch's plane is fitted to ``k`` of them and is
@@ -788,7 +788,7 @@ class VoxelMap:
             )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
-            # the shift onto the plane, weighed against the voxel's own observations
+            # the shift toward the plane, weighed against the voxel's own observations
             self._offset_all[touched] = off / (1.0 + np.maximum(self._w[touched], 1.0))
             if self.surface_model == "quadric":
                 self._quad_all[touched] = quadric_surface(
