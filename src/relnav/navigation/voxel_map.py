@@ -599,7 +599,7 @@ class VoxelMap:
         self._info_all = np.zeros((cap, 3, 3))
         self._normal_all = np.zeros((cap, 3))
         self._quad_all = np.zeros((cap, 11))
-        self._offset_all = np.zeros(cap)
+        self._patch_all = np.zeros((cap, 3))
         self.n = 0
         self._touched: set[int] = set()
         self._n_main = 0  # points [0, n_main) are in the main trees
@@ -659,7 +659,7 @@ class VoxelMap:
             self._info_all = np.resize(self._info_all, (cap, 3, 3))
             self._normal_all = np.resize(self._normal_all, (cap, 3))
             self._quad_all = np.resize(self._quad_all, (cap, 11))
-            self._offset_all = np.resize(self._offset_all, cap)
+            self._patch_all = np.resize(self._patch_all, (cap, 3))
         i = np.arange(self.n, self.n + m, dtype=np.int64)
         self._w[i] = 0.0
         self._s1[i] = 0.0
@@ -677,7 +677,7 @@ class VoxelMap:
             "_info_all",
             "_normal_all",
             "_quad_all",
-            "_offset_all",
+            "_patch_all",
         ):
             setattr(self, name, getattr(self, name)[keep].copy())
         self.n = len(keep)
@@ -788,8 +788,9 @@ class VoxelMap:
             )
             self._info_all[touched] = info
             self._normal_all[touched] = nrm
-            # the shift toward the plane, weighed against the voxel's own observations
-            self._offset_all[touched] = off / (1.0 + np.maximum(self._w[touched], 1.0))
+            if plane:  # the shift toward the plane, weighed against the voxel's observations
+                shift = off / (1.0 + np.maximum(self._w[touched], 1.0))
+                self._patch_all[touched] = mu[touched] - nrm * shift[:, None]
             if self.surface_model == "quadric":
                 self._quad_all[touched] = quadric_surface(
                     mu,
@@ -802,11 +803,7 @@ class VoxelMap:
                 )
         self._touched = set()
         self._mean = mu
-        if self.patch_point == "plane":
-            off = self._offset_all[:n]
-            self._patch_pt = mu - self._normal_all[:n] * off[:, None]
-        else:
-            self._patch_pt = mu
+        self._patch_pt = self._patch_all[:n] if self.patch_point == "plane" else mu
         self._dirty = False
 
 
