@@ -6,6 +6,8 @@ For every accepted step (``ok`` or ``flagged``) of relnav's causal run, the erro
 sees it. Sequences as simulated by ``benchmarks/nav/nav_suite.py`` into ``OUT/sequences``.
 
     python benchmarks/nav/nav_step_nees.py --out bench/nav --only eros-ellipse-64,envisat-jitter1
+    python benchmarks/nav/nav_step_nees.py --out bench/nav --only envisat-jitter1 \
+        -O map.patch_point=mean
 """
 
 from __future__ import annotations
@@ -41,10 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("bench/nav"))
     p.add_argument("--only", required=True, help="comma-separated sequence names")
+    p.add_argument("-O", dest="options", action="append", default=[], help="relnav key=value")
     a = p.parse_args(argv)
     names = [n for n in a.only.split(",") if n]
+    options = dict(o.split("=", 1) for o in a.options)
     for name, folder in simulate_suite(a.out, names).items():
-        q = step_nees(ScanSequence(folder))
+        q = step_nees(ScanSequence(folder), **options)
         print(f"{name:24s} step NEES mean {np.mean(q):8.1f} median {np.median(q):7.1f} n {len(q)}")
     return 0
 
