@@ -606,7 +606,6 @@ class VoxelMap:
         self._main_nb: tuple[np.ndarray, ...] | None = None
         self._recent_nb: tuple[np.ndarray, ...] | None = None
         self._mean: np.ndarray | None = None
-        self._patch_pt: np.ndarray | None = None
         self._dirty = True
 
     def __len__(self) -> int:
@@ -723,8 +722,10 @@ class VoxelMap:
         mean: on a sparse map the plane of ``k`` far neighbours cuts through a curved surface.
         """
         self._refresh()
-        assert self._patch_pt is not None
-        return self._patch_pt
+        if self.patch_point == "plane":
+            return self._patch_all[: self.n]
+        assert self._mean is not None
+        return self._mean
 
     @property
     def information(self) -> np.ndarray:
@@ -803,7 +804,6 @@ class VoxelMap:
                 )
         self._touched = set()
         self._mean = mu
-        self._patch_pt = self._patch_all[:n] if self.patch_point == "plane" else mu
         self._dirty = False
 
 
